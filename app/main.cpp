@@ -1,0 +1,232 @@
+// toolbench: the command-line entry point. See README.md for the commands.
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "app/frame_io.h"
+#include "app/scene_setup.h"
+#include "common/check.h"
+#include "common/paths.h"
+#include "common/rng.h"
+#include "sim/renderer.h"
+#include "toollib/mesh.h"
+
+namespace {
+
+using namespace toolbench;
+
+/// Options shared by every command that builds a scene.
+void AddSceneOptions(CLI::App* cmd, app::SceneRequest& request) {
+  // Parsed as a string: CLI11 would wrap "-3" into a huge unsigned number.
+  cmd->add_option_function<std::string>(
+         "--seed",
+         [&request](const std::string& text) {
+           if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos) {
+             throw CLI::ValidationError("--seed", "must be a non-negative integer, got '" + text + "'");
+           }
+           try {
+             request.seed = std::stoull(text);
+           } catch (const std::exception&) {
+             throw CLI::ValidationError("--seed", "out of range: '" + text + "'");
+           }
+         },
+         "Seed of every random draw (tools, ball, sensor noise), a non-negative integer")
+      ->default_str("1");
+  cmd->add_option("--scene", request.scene_file,
+                  "Scene file (JSON); default: scenes/default.json in the source tree")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--tools", request.tools,
+                  "Tool models to put on the rack, comma-separated (default: 1-3 drawn from the seed)")
+      ->delimiter(',');
+  cmd->add_option("--cells", request.cells,
+                  "Table 5.3 cell of each tool: pos1 pos2 pos3 rot0 rot1 rot2 rot3 (default: "
+                  "pos1, pos2, pos3 in order; pos2 for one tool)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"pos1", "pos2", "pos3", "rot0", "rot1", "rot2", "rot3"}));
+  cmd->add_option("--tool-dir", request.extra_tool_dirs,
+                  "Extra folder of user tools (STL/OBJ/PLY mesh + JSON sidecar); repeatable")
+      ->check(CLI::ExistingDirectory);
+}
+
+nlohmann::json ToolsJson(const app::LoadedScene& scene, const sim::GroundTruth& truth) {
+  nlohmann::json tools = nlohmann::json::array();
+  for (const auto& placed : scene.composed.tools) {
+    const Eigen::Isometry3d X_RT = scene.composed.X_WR.inverse() * truth.Pose(placed.body);
+    tools.push_back({{"name", placed.name}, {"cell", placed.cell}, {"X_RT", app::PoseJson(X_RT)}});
+  }
+  return tools;
+}
+
+int RunRender(const app::SceneRequest& request, const std::filesystem::path& out_dir, bool noise,
+              bool look_at_table, const std::string& camera) {
+  const auto t_start = std::chrono::steady_clock::now();
+  app::LoadedScene scene = app::LoadScene(request);
+  sim::World world(scene.composed.mjcf, "scene seed " + std::to_string(request.seed));
+  sim::SimRobot robot(world);
+
+  // Let the tools come to rest on the rack, then turn torso and head (thesis Fig. 5.4).
+  const bool at_rest = world.SettleFreeBodies(scene.spec.physics.settle_time);
+  if (!at_rest) spdlog::warn("render: tools still moving after {} s of settling", scene.spec.physics.settle_time);
+  sim::SimStatus status = world.status();
+  const sim::GroundTruth settled = world.ground_truth();
+  const Eigen::Vector3d target =
+      look_at_table ? Eigen::Vector3d(scene.spec.table.center.x(), scene.spec.table.center.y(),
+                                      scene.spec.table.top_z)
+                    : app::RackViewTarget(scene.spec);
+  const app::LookResult look = app::LookAt(robot, scene.robot, target);
+  status = world.status();
+  if (!status.ok) throw std::runtime_error("simulation became unstable: " + status.message);
+
+  sim::GlContext gl;
+  sim::RendererOptions options;
+  options.noise.enabled = noise;
+  options.camera = camera;
+  sim::Renderer renderer(gl, world, options);
+  RgbdFrame frame = renderer.Render(world, DeriveSeed(request.seed, "sensor_noise"));
+  // The helmet camera's pose comes from encoder forward kinematics, as on the robot; the
+  // overview camera is fixed in the world with calibrated extrinsics.
+  frame.X_RC = camera == "helmet" ? app::CameraPoseFromEncoders(scene.robot, robot) : scene.composed.X_RO;
+
+  nlohmann::json extra;
+  extra["seed"] = request.seed;
+  extra["camera"] = camera;
+  extra["noise"] = noise;
+  extra["joints"] = nlohmann::json::object();
+  const auto names = robot.JointNames();
+  const Eigen::VectorXd q = robot.ReadEncoders();
+  for (size_t i = 0; i < names.size(); ++i) extra["joints"][names[i]] = q[static_cast<Eigen::Index>(i)];
+  extra["gaze"] = {{"target_R", {target.x(), target.y(), target.z()}},
+                   {"converged", look.gaze.converged},
+                   {"error_deg", look.gaze.error_deg},
+                   {"motion_reached", look.motion.reached}};
+  app::WriteFrame(out_dir, frame, extra);
+
+  // Ground truth goes to its own file, for scoring only.
+  const sim::GroundTruth truth = world.ground_truth();
+  nlohmann::json gt;
+  gt["note"] = "simulator ground truth: for scoring and debugging, never an input to perception";
+  gt["X_WR"] = app::PoseJson(scene.composed.X_WR);
+  gt["tools"] = ToolsJson(scene, truth);
+  gt["ball_R"] = app::PoseJson(scene.composed.X_WR.inverse() * truth.Pose("ball"))["position"];
+  double drift = 0.0;
+  for (const auto& placed : scene.composed.tools) {
+    drift = std::max(drift, (truth.Pose(placed.body).translation() -
+                             settled.Pose(placed.body).translation()).norm());
+  }
+  gt["tool_drift_since_settled_m"] = drift;
+  gt["settled"] = at_rest;
+  WriteTextFile(out_dir / "ground_truth.json", gt.dump(2) + "\n");
+  WriteTextFile(out_dir / "scene.xml", scene.composed.mjcf);
+
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  spdlog::info("render: seed {}, {} tool(s), frame written to {} ({:.2f} s)", request.seed,
+               scene.composed.tools.size(), out_dir.string(), seconds);
+  std::cout << out_dir.string() << "\n";
+  return 0;
+}
+
+int RunScene(const app::SceneRequest& request, const std::filesystem::path& save) {
+  const app::LoadedScene scene = app::LoadScene(request);
+  // Compile it once so that what we write is known to load.
+  sim::World world(scene.composed.mjcf, "scene seed " + std::to_string(request.seed));
+  WriteTextFile(save, scene.composed.mjcf);
+  for (const auto& placed : scene.composed.tools) {
+    spdlog::info("scene: {} at {}", placed.name, placed.cell);
+  }
+  std::cout << save.string() << "\n";
+  return 0;
+}
+
+int RunToolsList(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& scene_file) {
+  const sim::SceneSpec spec =
+      sim::LoadSceneSpec(scene_file.empty() ? sim::DefaultScenePath() : scene_file);
+  const auto library = app::LoadLibraries(spec, dirs);
+  std::printf("%-14s %-8s %7s %7s %9s %6s %6s\n", "name", "family", "length", "mass", "handle_d",
+              "faces", "parts");
+  for (const auto& tool : library) {
+    std::printf("%-14s %-8s %6.3fm %5.3fkg %7.1fmm %6ld %6zu\n", tool.name.c_str(),
+                tool.family.c_str(), tool.total_length, tool.mass, 2000.0 * tool.handle.radius,
+                static_cast<long>(tool.mesh.faces.cols()), tool.collision.size());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App cli{
+      "toolbench: a digital twin of the iCub choosing and using tools (MuJoCo, headless).\n"
+      "Every command is deterministic for a given --seed."};
+  cli.require_subcommand(1);
+  std::string log_level = "info";
+  cli.add_option("--log-level", log_level, "Log level: trace debug info warn error off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
+      ->capture_default_str();
+
+  app::SceneRequest render_request;
+  std::filesystem::path render_out;
+  bool no_noise = false;
+  std::string look = "rack";
+  std::string camera = "helmet";
+  CLI::App* render = cli.add_subcommand(
+      "render", "Compose a scene, turn torso and head to the rack and write one RGB-D frame: "
+                "rgb.png, depth.png (uint16 mm), camera.json (intrinsics, X_RC from encoder FK), "
+                "cloud.ply (root frame), ground_truth.json, scene.xml");
+  AddSceneOptions(render, render_request);
+  render->add_option("--out", render_out, "Output folder (default: runs/render-seed<N>)");
+  render->add_flag("--no-noise", no_noise, "Ideal images: switch the sensor noise model off");
+  render->add_option("--look", look, "What to look at: rack or table")
+      ->check(CLI::IsMember({"rack", "table"}))
+      ->capture_default_str();
+  render->add_option("--camera", camera,
+                     "helmet (the robot's RGB-D sensor) or overview (a fixed third-person view "
+                     "for looking at the scene)")
+      ->check(CLI::IsMember({"helmet", "overview"}))
+      ->capture_default_str();
+
+  app::SceneRequest scene_request;
+  std::filesystem::path scene_save;
+  CLI::App* scene = cli.add_subcommand(
+      "scene", "Compose a scene and write its MJCF, which MuJoCo (and its viewer) loads unchanged");
+  AddSceneOptions(scene, scene_request);
+  scene->add_option("--save", scene_save, "Where to write the MJCF")->required();
+
+  std::vector<std::filesystem::path> list_dirs;
+  std::filesystem::path list_scene;
+  CLI::App* tools = cli.add_subcommand(
+      "tools", "List the tool library (and check user tools: each mesh must be watertight, "
+               "outward-oriented, in metres)");
+  tools->add_option("--tool-dir", list_dirs, "Extra folder of user tools; repeatable")
+      ->check(CLI::ExistingDirectory);
+  tools->add_option("--scene", list_scene, "Scene file naming the library folders")
+      ->check(CLI::ExistingFile);
+
+  try {
+    cli.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return cli.exit(e);
+  }
+  spdlog::set_default_logger(spdlog::stderr_color_mt("toolbench"));
+  spdlog::set_level(spdlog::level::from_str(log_level));
+  try {
+    if (render->parsed()) {
+      if (render_out.empty()) render_out = "runs/render-seed" + std::to_string(render_request.seed);
+      return RunRender(render_request, render_out, !no_noise, look == "table", camera);
+    }
+    if (scene->parsed()) return RunScene(scene_request, scene_save);
+    if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,126 @@
+#include "app/scene_setup.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include <spdlog/spdlog.h>
+
+#include "common/check.h"
+#include "common/paths.h"
+
+namespace toolbench::app {
+namespace {
+
+/// Posture while observing: torso leaning back a little (the camera gains distance from the rack),
+/// right arm down beside the torso (in the home posture the hand reaches forward-right, right in
+/// front of the rack).
+const std::map<std::string, double> kObservePostureDeg = {
+    {"torso_pitch", -20.0},
+    {"r_shoulder_pitch", -5.0}, {"r_shoulder_roll", 12.0}, {"r_shoulder_yaw", 0.0},
+    {"r_elbow", 25.0},          {"r_wrist_prosup", 0.0},   {"r_wrist_pitch", 0.0},
+    {"r_wrist_yaw", 0.0}};
+
+}  // namespace
+
+std::vector<toollib::ToolModel> LoadLibraries(const sim::SceneSpec& spec,
+                                              const std::vector<std::filesystem::path>& extra_dirs) {
+  std::vector<std::filesystem::path> dirs;
+  for (const auto& d : spec.tool_dirs) dirs.push_back(AssetsDir() / d);
+  dirs.insert(dirs.end(), extra_dirs.begin(), extra_dirs.end());
+  std::vector<toollib::ToolModel> library;
+  std::set<std::string> names;
+  for (const auto& dir : dirs) {
+    if (!std::filesystem::is_directory(dir)) {
+      ThrowInvalid("tool folder '", dir.string(), "' does not exist");
+    }
+    for (auto& tool : toollib::LoadToolLibrary(dir)) {
+      if (!names.insert(tool.name).second) {
+        ThrowInvalid("tool '", tool.name, "' in '", dir.string(),
+                     "' has the same name as a tool loaded before; rename one of them");
+      }
+      library.push_back(std::move(tool));
+    }
+  }
+  return library;
+}
+
+LoadedScene LoadScene(const SceneRequest& request) {
+  LoadedScene loaded;
+  const std::filesystem::path scene_file =
+      request.scene_file.empty() ? sim::DefaultScenePath() : request.scene_file;
+  loaded.spec = sim::LoadSceneSpec(scene_file);
+  loaded.robot = robot::LoadRobotDescription(AssetsDir() / loaded.spec.robot);
+  loaded.library = LoadLibraries(loaded.spec, request.extra_tool_dirs);
+
+  std::vector<sim::ToolPlacement> placements;
+  if (!request.cells.empty() && request.cells.size() != request.tools.size()) {
+    ThrowInvalid("--cells has ", request.cells.size(), " entries but --tools has ",
+                 request.tools.size(), "; give one cell per tool");
+  }
+  for (size_t i = 0; i < request.tools.size(); ++i) {
+    sim::ToolPlacement p;
+    p.tool = request.tools[i];
+    if (!request.cells.empty()) {
+      p.cell = request.cells[i];
+    } else {
+      p.cell = request.tools.size() == 1 ? "pos2" : "pos" + std::to_string(i + 1);
+    }
+    placements.push_back(p);
+  }
+  std::vector<std::string> names;
+  for (const auto& tool : loaded.library) names.push_back(tool.name);
+  const sim::ScenePlan plan = sim::PlanScene(loaded.spec, names, request.seed, placements);
+  loaded.composed = sim::ComposeScene(loaded.spec, loaded.robot, loaded.library, plan);
+  return loaded;
+}
+
+Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<std::string>& names,
+                       const Eigen::VectorXd& encoders) {
+  if (static_cast<Eigen::Index>(names.size()) != encoders.size()) {
+    ThrowInvalid("ModelQ: ", names.size(), " names for ", encoders.size(), " encoder values");
+  }
+  Eigen::VectorXd q = robot.HomeQ();
+  for (size_t i = 0; i < names.size(); ++i) {
+    const robot::Joint& joint = robot.model.joints[robot.model.JointIndex(names[i])];
+    if (joint.q_index < 0) ThrowInvalid("ModelQ: joint '", names[i], "' is fixed in the URDF");
+    q[joint.q_index] = encoders[static_cast<Eigen::Index>(i)];
+  }
+  return q;
+}
+
+Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot,
+                                         const RobotInterface& interface) {
+  const Eigen::VectorXd q = ModelQ(robot, interface.JointNames(), interface.ReadEncoders());
+  return robot::LinkPose(robot.model, q, robot.camera_frame);
+}
+
+Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
+  const Eigen::Isometry3d X_RK = sim::RackPose(spec.rack);
+  return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);
+}
+
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot,
+                  const Eigen::Vector3d& p_R_target) {
+  LookResult result;
+  // Gaze starts from the observation posture (torso leaning back a little, for distance).
+  std::map<std::string, double> observe;
+  for (const auto& [joint, deg] : kObservePostureDeg) observe[joint] = deg * M_PI / 180.0;
+  const Eigen::VectorXd q =
+      robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), observe);
+  result.gaze = control::LookAt(robot, q, p_R_target);
+  if (!result.gaze.converged) {
+    spdlog::warn("gaze: target {} {} {} cannot be centred (residual {:.1f} deg); looking as close "
+                 "as the joint limits allow",
+                 p_R_target.x(), p_R_target.y(), p_R_target.z(), result.gaze.error_deg);
+  }
+  // The right arm moves down beside the torso at the same time, so that the hand does not hide
+  // the rack (in the home posture it reaches forward-right, right in front of it).
+  std::map<std::string, double> goal = observe;
+  for (const auto& [joint, value] : result.gaze.joints) goal[joint] = value;
+  result.motion = control::MoveJoints(interface, goal);
+  return result;
+}
+
+}  // namespace toolbench::app

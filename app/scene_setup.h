@@ -1,0 +1,70 @@
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "control/gaze.h"
+#include "control/motion.h"
+#include "robot/robot_description.h"
+#include "sim/scene_composer.h"
+#include "sim/scene_spec.h"
+#include "sim/world.h"
+#include "toollib/tool_model.h"
+
+namespace toolbench::app {
+
+/// What the user asked for on the command line.
+struct SceneRequest {
+  std::filesystem::path scene_file;                     // empty = scenes/default.json
+  std::uint64_t seed = 1;
+  std::vector<std::string> tools;                       // empty = drawn from the seed
+  std::vector<std::string> cells;                       // one per tool, or empty
+  std::vector<std::filesystem::path> extra_tool_dirs;   // user tools (mesh + sidecar)
+};
+
+/// Everything loaded and composed for one scene.
+struct LoadedScene {
+  sim::SceneSpec spec;
+  robot::RobotDescription robot;
+  std::vector<toollib::ToolModel> library;
+  sim::ComposedScene composed;
+};
+
+/// Loads the scene file, the robot, the tool library (assets plus user folders; a name defined
+/// twice is an error) and composes the MJCF. Tools without cells get pos1, pos2, pos3 in order
+/// (a single tool gets pos2). Throws std::invalid_argument naming the bad input.
+LoadedScene LoadScene(const SceneRequest& request);
+
+/// Loads every tool folder of the scene plus `extra_dirs`; throws on duplicates or bad files.
+std::vector<toollib::ToolModel> LoadLibraries(const sim::SceneSpec& spec,
+                                              const std::vector<std::filesystem::path>& extra_dirs);
+
+/// Joint vector in the robot model's q order from encoder readings named `names`. Joints the
+/// encoders do not cover keep their HomeQ value. Throws on an encoder of an unknown joint.
+Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<std::string>& names,
+                       const Eigen::VectorXd& encoders);
+
+/// Camera pose in the root frame from the encoders (forward kinematics of the URDF): the only
+/// camera pose perception may use.
+Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot,
+                                         const RobotInterface& interface);
+
+/// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
+Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
+
+/// Outcome of turning torso and head toward a point.
+struct LookResult {
+  control::GazeResult gaze;
+  control::MotionResult motion;
+};
+
+/// Solves gaze for `p_R_target` and moves torso and neck there with a minimum-jerk trajectory
+/// (thesis Fig. 5.4). Never throws for an unreachable gaze: the result says so.
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot,
+                  const Eigen::Vector3d& p_R_target);
+
+}  // namespace toolbench::app

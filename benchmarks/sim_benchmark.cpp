@@ -1,0 +1,85 @@
+// Physics and camera throughput of the full default scene (3 tools on the rack, robot, ball).
+// Goals (issue 2): sensor frame 640x480 RGB + depth <= 10 ms; physics >= 10x real time on one core.
+#include <benchmark/benchmark.h>
+#include <mujoco/mujoco.h>
+
+#include "app/scene_setup.h"
+#include "sim/renderer.h"
+
+namespace {
+
+using namespace toolbench;
+
+/// The full scene: three tools, chosen so every benchmark run measures the same thing.
+app::LoadedScene FullScene() {
+  app::SceneRequest request;
+  request.seed = 1;
+  request.tools = {"hoe_1", "rake_2", "hook_3"};
+  return app::LoadScene(request);
+}
+
+/// One mj_step of the full scene while the arm follows a slow sinusoid (contacts on the rack).
+void BM_SimStepFullScene(benchmark::State& state) {
+  const app::LoadedScene scene = FullScene();
+  sim::World world(scene.composed.mjcf, "bench");
+  world.SettleFreeBodies(scene.spec.physics.settle_time);
+  const Eigen::VectorXd home = world.JointTargets();
+  int step = 0;
+  double contacts = 0;
+  for (auto _ : state) {
+    if (step % 50 == 0) {
+      Eigen::VectorXd target = home;
+      const double t = world.time();
+      for (int i = 3; i < 10 && i < target.size(); ++i) target[i] += 0.2 * std::sin(0.5 * t + i);
+      world.SetJointTargets(target);
+    }
+    world.Step(1);
+    contacts += world.num_contacts();
+    ++step;
+  }
+  state.SetItemsProcessed(state.iterations());
+  state.counters["contacts_per_step"] = benchmark::Counter(contacts / std::max(1, step));
+  // Real-time factor: simulated seconds per wall second.
+  state.counters["realtime_factor"] =
+      benchmark::Counter(world.timestep() * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_SimStepFullScene)->Unit(benchmark::kMicrosecond)->MinTime(2.0);
+
+/// One helmet-camera frame: scene update, render, read back RGB and depth, convert depth to
+/// metres (no sensor noise: that is measured separately).
+void BM_RenderRgbdFrame(benchmark::State& state) {
+  const app::LoadedScene scene = FullScene();
+  sim::World world(scene.composed.mjcf, "bench");
+  sim::GlContext gl;
+  sim::RendererOptions options;
+  options.noise.enabled = false;
+  options.shadows = state.range(0) != 0;
+  sim::Renderer renderer(gl, world, options);
+  for (auto _ : state) {
+    RgbdFrame frame = renderer.Render(world, 0);
+    benchmark::DoNotOptimize(frame.depth.data);
+  }
+  state.SetItemsProcessed(state.iterations());
+  state.SetLabel(options.shadows ? "shadows+reflections" : "sensor mode");
+}
+BENCHMARK(BM_RenderRgbdFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+/// The sensor noise model on a 640x480 frame.
+void BM_SensorNoise(benchmark::State& state) {
+  CameraIntrinsics K;
+  K.fx = K.fy = 433;
+  K.cx = 319.5;
+  K.cy = 239.5;
+  cv::Mat rgb(480, 640, CV_8UC3, cv::Scalar(120, 120, 120));
+  cv::Mat depth(480, 640, CV_32FC1, cv::Scalar(0.7f));
+  std::uint64_t seed = 0;
+  for (auto _ : state) {
+    cv::Mat r = rgb.clone();
+    cv::Mat d = depth.clone();
+    sim::ApplySensorNoise(r, d, K, {}, ++seed);
+    benchmark::DoNotOptimize(d.data);
+  }
+}
+BENCHMARK(BM_SensorNoise)->Unit(benchmark::kMillisecond);
+
+}  // namespace

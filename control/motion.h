@@ -1,0 +1,44 @@
+#pragma once
+
+#include <map>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "common/robot_interface.h"
+
+namespace toolbench::control {
+
+/// Minimum-jerk time scaling s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 for tau in [0, 1] (clamped):
+/// zero velocity and acceleration at both ends.
+double MinJerk(double tau);
+
+/// Joint positions on the minimum-jerk path from q0 to q1 at time t of a motion lasting T [s].
+Eigen::VectorXd MinJerkPoint(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1, double t,
+                             double T);
+
+/// How a joint motion is executed and judged done.
+struct MotionOptions {
+  double duration = 1.5;        // trajectory time [s], > 0
+  double command_period = 0.01; // period of target updates [s], > 0
+  double position_tol = 0.02;   // |q - q_target| per joint to count as arrived [rad], > 0
+  double velocity_tol = 0.05;   // |qdot| per joint to count as still [rad/s], > 0
+  double timeout = 2.0;         // extra time allowed after the trajectory ends [s], >= 0
+  void Validate() const;        // throws std::invalid_argument naming the field
+};
+
+/// Outcome of a joint motion (an expected failure is a result, not an exception).
+struct MotionResult {
+  bool reached = false;        // all joints within position_tol and still before the timeout
+  double max_error = 0.0;      // largest |q - q_target| at the end [rad]
+  std::string worst_joint;     // joint with max_error
+  double elapsed = 0.0;        // robot time spent [s]
+};
+
+/// Moves the named joints (others keep their targets) along a minimum-jerk path to `goal`
+/// [rad] by streaming position targets, then waits until the encoders say the motion is done or
+/// the timeout passes. Throws std::invalid_argument naming an unknown joint or a non-finite goal.
+MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
+                        const MotionOptions& options = {});
+
+}  // namespace toolbench::control

@@ -1,0 +1,90 @@
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace toolbench::sim {
+
+/// Table: a box whose top face is at `top_z`, in the robot root frame R (x backward, y right,
+/// z up; see shared/facts/icub.md section 1).
+struct TableSpec {
+  Eigen::Vector2d center{-0.42, -0.12};  // top centre (x, y) in R [m]
+  Eigen::Vector2d size{0.50, 0.60};      // top extent along x and y [m], > 0
+  double top_z = -0.10;                  // height of the top face in R [m]
+  double thickness = 0.03;               // [m], > 0
+};
+
+/// The ball to be retrieved; its (x, y) is drawn uniformly from the ranges (R frame).
+struct BallSpec {
+  double radius = 0.035;                   // [m], > 0
+  double mass = 0.06;                      // [kg], > 0
+  Eigen::Vector2d x_range{-0.62, -0.56};   // [m], min <= max
+  Eigen::Vector2d y_range{-0.10, 0.05};    // [m], min <= max
+};
+
+/// The tool rack: an inclined board with a ledge at its foot, to the robot's right, facing it
+/// (thesis Fig. 5.3). Rack frame K: origin where the board meets the ledge, at the middle of the
+/// rack; x_K along the rack, y_K the board normal pointing toward the robot, z_K up the board.
+/// With yaw 0 the board is parallel to the robot's sagittal plane (x_K = robot forward = -x_R,
+/// y_K = -y_R); `yaw_deg` turns the rack about the vertical so that it faces the robot from
+/// the front-right. Tools stand on the ledge (z_K >= 0) in front of the board (y_K >= 0).
+struct RackSpec {
+  Eigen::Vector3d origin{-0.19, 0.53, -0.10};  // K origin in R [m]
+  double yaw_deg = 15.0;       // rotation of the rack about z_R [deg], [-90, 90]
+  double incline_deg = 25.0;   // board tilt away from the robot, from vertical [deg], [0, 45]
+  double width = 0.56;         // along x_K [m], > 0
+  double height = 0.55;        // along z_K [m], > 0
+  double ledge_depth = 0.11;   // along y_K [m], > 0
+  double lip_height = 0.03;    // ledge lip along z_K [m], >= 0
+  double slot_pos1 = -0.17;    // x_K of place pos1 [m] (the end away from the table)
+  double slot_pos2 = 0.0;      // x_K of place pos2 [m] (central place, used by rot0..rot3)
+  double slot_pos3 = 0.17;     // x_K of place pos3 [m] (the end near the table)
+};
+
+/// How many tools a random scene gets and from which models.
+struct ToolsSpec {
+  int min_count = 1;                 // >= 1
+  int max_count = 3;                 // >= min_count, <= 3
+  std::vector<std::string> choices;  // model names; empty = the whole library
+};
+
+/// Simulation settings of the scene.
+struct PhysicsSpec {
+  double timestep = 0.002;           // [s], (0, 0.01]
+  std::string cone = "elliptic";     // "pyramidal" or "elliptic"
+  double impratio = 10.0;            // >= 1
+  int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
+  double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
+};
+
+/// A complete scene description (scenes/*.json). Paths are relative to the assets folder.
+struct SceneSpec {
+  std::string name = "default";
+  std::string robot = "robots/icub_upper_body.json";
+  std::vector<std::string> tool_dirs{"tools"};
+  Eigen::Vector3d robot_base{0.0, 0.0, 0.63};  // root R origin in the world W [m]; R is not rotated
+  TableSpec table;
+  BallSpec ball;
+  RackSpec rack;
+  ToolsSpec tools;
+  PhysicsSpec physics;
+
+  /// Throws std::invalid_argument naming the field and value when out of range.
+  void Validate() const;
+};
+
+/// Parses scene JSON text. Every field is optional (defaults above); unknown fields are errors
+/// (they are typos). `source` names the input in messages. Throws std::invalid_argument.
+SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source);
+
+/// Reads and parses a scene file; throws std::invalid_argument naming the path on failure.
+SceneSpec LoadSceneSpec(const std::filesystem::path& path);
+
+/// scenes/default.json under the source root.
+std::filesystem::path DefaultScenePath();
+
+}  // namespace toolbench::sim

@@ -1,0 +1,263 @@
+#include "sim/world.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <algorithm>
+#include <mutex>
+
+#include <mujoco/mujoco.h>
+#include <spdlog/spdlog.h>
+
+#include "common/check.h"
+
+namespace toolbench::sim {
+namespace {
+
+void OnMujocoError(const char* message) {
+  // MuJoCo cannot continue after mju_error; never throw through its C frames (style.md 6).
+  spdlog::critical("MuJoCo error: {}", message);
+  std::abort();
+}
+
+void OnMujocoWarning(const char* message) { spdlog::warn("MuJoCo warning: {}", message); }
+
+Eigen::Isometry3d PoseFrom(const mjtNum* pos, const mjtNum* quat) {
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  X.translation() = Eigen::Vector3d(pos[0], pos[1], pos[2]);
+  X.linear() = Eigen::Quaterniond(quat[0], quat[1], quat[2], quat[3]).normalized().toRotationMatrix();
+  return X;
+}
+
+}  // namespace
+
+const Eigen::Isometry3d& GroundTruth::Pose(std::string_view body) const {
+  auto it = X_WB.find(std::string(body));
+  if (it == X_WB.end()) ThrowInvalid("GroundTruth::Pose: unknown body '", body, "'");
+  return it->second;
+}
+
+void InstallMujocoHandlers() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    mju_user_error = OnMujocoError;
+    mju_user_warning = OnMujocoWarning;
+  });
+}
+
+struct World::Impl {
+  mjModel* m = nullptr;
+  mjData* d = nullptr;
+  std::vector<std::string> joints;  // actuated joint names, actuator order
+  std::vector<int> qpos_adr;        // per actuator
+  std::vector<int> dof_adr;         // per actuator
+  SimStatus status;
+
+  ~Impl() {
+    if (d) mj_deleteData(d);
+    if (m) mj_deleteModel(m);
+  }
+
+  void CheckWarnings() {
+    if (!status.ok) return;
+    static constexpr int kFatal[] = {mjWARN_BADQPOS, mjWARN_BADQVEL, mjWARN_BADQACC,
+                                     mjWARN_BADCTRL};
+    for (int w : kFatal) {
+      if (d->warning[w].number > 0) {
+        status.ok = false;
+        status.message = Cat("MuJoCo reported ", mju_warningText(w, d->warning[w].lastinfo),
+                             " at t = ", d->time, " s");
+        return;
+      }
+    }
+  }
+};
+
+World::World(const std::string& mjcf, std::string_view source) : impl_(std::make_unique<Impl>()) {
+  InstallMujocoHandlers();
+  // mjVFS holds 2000 file names of 1000 chars: keep it off the stack.
+  auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  const char* kName = "scene.xml";
+  if (mj_makeEmptyFileVFS(vfs.get(), kName, static_cast<int>(mjcf.size())) != 0) {
+    ThrowInvalid("World: could not stage '", source, "' in MuJoCo's virtual file system");
+  }
+  const int index = mj_findFileVFS(vfs.get(), kName);
+  std::memcpy(vfs->filedata[index], mjcf.data(), mjcf.size());
+  char error[1024] = {0};
+  impl_->m = mj_loadXML(kName, vfs.get(), error, sizeof(error));
+  mj_deleteVFS(vfs.get());
+  if (!impl_->m) ThrowInvalid("World: MuJoCo cannot load '", source, "': ", error);
+  impl_->d = mj_makeData(impl_->m);
+  const mjModel* m = impl_->m;
+  for (int a = 0; a < m->nu; ++a) {
+    if (m->actuator_trntype[a] != mjTRN_JOINT) {
+      ThrowInvalid("World: actuator ", a, " of '", source, "' does not drive a joint");
+    }
+    const int j = m->actuator_trnid[2 * a];
+    impl_->joints.emplace_back(mj_id2name(m, mjOBJ_JOINT, j));
+    impl_->qpos_adr.push_back(m->jnt_qposadr[j]);
+    impl_->dof_adr.push_back(m->jnt_dofadr[j]);
+  }
+  if (m->nkey > 0) {
+    ResetToKeyframe(mj_id2name(m, mjOBJ_KEY, 0));
+  } else {
+    mj_forward(m, impl_->d);
+  }
+}
+
+World::~World() = default;
+World::World(World&&) noexcept = default;
+World& World::operator=(World&&) noexcept = default;
+
+void World::ResetToKeyframe(std::string_view key) {
+  const int id = mj_name2id(impl_->m, mjOBJ_KEY, std::string(key).c_str());
+  if (id < 0) ThrowInvalid("World::ResetToKeyframe: unknown keyframe '", key, "'");
+  mj_resetDataKeyframe(impl_->m, impl_->d, id);
+  mj_forward(impl_->m, impl_->d);
+  impl_->status = SimStatus{};
+}
+
+SimStatus World::Step(int steps) {
+  for (int i = 0; i < steps && impl_->status.ok; ++i) {
+    mj_step(impl_->m, impl_->d);
+    impl_->CheckWarnings();
+  }
+  return impl_->status;
+}
+
+SimStatus World::Advance(double seconds) {
+  const int steps = static_cast<int>(std::ceil(seconds / impl_->m->opt.timestep - 1e-9));
+  return Step(std::max(0, steps));
+}
+
+double World::MaxFreeBodySpeed() const {
+  const mjModel* m = impl_->m;
+  double fastest = 0.0;
+  for (int j = 0; j < m->njnt; ++j) {
+    if (m->jnt_type[j] != mjJNT_FREE) continue;
+    const mjtNum* v = impl_->d->qvel + m->jnt_dofadr[j];
+    fastest = std::max({fastest, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
+                        0.1 * std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5])});
+  }
+  return fastest;
+}
+
+bool World::SettleFreeBodies(double max_time, double speed_tol, double hold) {
+  // Judged by displacement over a window, not instantaneous speed: contacts of small convex parts
+  // vibrate at a few mm/s without the body going anywhere.
+  const mjModel* m = impl_->m;
+  auto free_poses = [&] {
+    std::vector<double> pose;
+    for (int j = 0; j < m->njnt; ++j) {
+      if (m->jnt_type[j] != mjJNT_FREE) continue;
+      const mjtNum* q = impl_->d->qpos + m->jnt_qposadr[j];
+      pose.insert(pose.end(), q, q + 7);
+    }
+    return pose;
+  };
+  const double t_end = impl_->d->time + max_time;
+  std::vector<double> before = free_poses();
+  while (impl_->d->time < t_end && impl_->status.ok) {
+    Advance(hold);
+    const std::vector<double> after = free_poses();
+    double moved = 0.0;
+    for (size_t i = 0; i < after.size(); i += 7) {
+      const double dp = std::sqrt(std::pow(after[i] - before[i], 2) + std::pow(after[i + 1] - before[i + 1], 2) +
+                                  std::pow(after[i + 2] - before[i + 2], 2));
+      double dot = 0.0;
+      for (int k = 3; k < 7; ++k) dot += after[i + k] * before[i + k];
+      const double angle = 2.0 * std::acos(std::min(1.0, std::abs(dot)));
+      moved = std::max({moved, dp, 0.1 * angle});  // 0.1 m lever: 1 mrad counts as 0.1 mm
+    }
+    if (moved < speed_tol * hold) return true;
+    before = after;
+  }
+  return false;
+}
+
+double World::time() const { return impl_->d->time; }
+double World::timestep() const { return impl_->m->opt.timestep; }
+SimStatus World::status() const { return impl_->status; }
+const std::vector<std::string>& World::actuated_joints() const { return impl_->joints; }
+
+Eigen::VectorXd World::JointPositions() const {
+  Eigen::VectorXd q(impl_->joints.size());
+  for (size_t i = 0; i < impl_->joints.size(); ++i) q[i] = impl_->d->qpos[impl_->qpos_adr[i]];
+  return q;
+}
+
+Eigen::VectorXd World::JointVelocities() const {
+  Eigen::VectorXd v(impl_->joints.size());
+  for (size_t i = 0; i < impl_->joints.size(); ++i) v[i] = impl_->d->qvel[impl_->dof_adr[i]];
+  return v;
+}
+
+Eigen::VectorXd World::JointTargets() const {
+  return Eigen::Map<const Eigen::VectorXd>(impl_->d->ctrl, impl_->m->nu);
+}
+
+void World::SetJointTargets(const Eigen::VectorXd& q_target) {
+  if (q_target.size() != impl_->m->nu) {
+    ThrowInvalid("World::SetJointTargets: got ", q_target.size(), " targets, the robot has ",
+                 impl_->m->nu, " actuated joints");
+  }
+  if (!q_target.allFinite()) {
+    ThrowInvalid("World::SetJointTargets: non-finite target ", q_target.transpose());
+  }
+  for (int a = 0; a < impl_->m->nu; ++a) {
+    double v = q_target[a];
+    if (impl_->m->actuator_ctrllimited[a]) {
+      v = std::clamp(v, impl_->m->actuator_ctrlrange[2 * a], impl_->m->actuator_ctrlrange[2 * a + 1]);
+    }
+    impl_->d->ctrl[a] = v;
+  }
+}
+
+void World::TeleportJoints(const Eigen::VectorXd& q) {
+  SetJointTargets(q);
+  for (size_t i = 0; i < impl_->joints.size(); ++i) {
+    impl_->d->qpos[impl_->qpos_adr[i]] = impl_->d->ctrl[i];
+    impl_->d->qvel[impl_->dof_adr[i]] = 0.0;
+  }
+  mj_forward(impl_->m, impl_->d);
+}
+
+GroundTruth World::ground_truth() const {
+  GroundTruth truth;
+  truth.time = impl_->d->time;
+  const mjModel* m = impl_->m;
+  for (int b = 1; b < m->nbody; ++b) {
+    const char* name = mj_id2name(m, mjOBJ_BODY, b);
+    if (!name) continue;
+    truth.X_WB[name] = PoseFrom(impl_->d->xpos + 3 * b, impl_->d->xquat + 4 * b);
+  }
+  return truth;
+}
+
+int World::num_contacts() const { return impl_->d->ncon; }
+
+std::vector<std::string> World::ContactingBodies(std::string_view body) const {
+  const mjModel* m = impl_->m;
+  const int id = mj_name2id(m, mjOBJ_BODY, std::string(body).c_str());
+  if (id < 0) ThrowInvalid("World::ContactingBodies: unknown body '", body, "'");
+  std::vector<std::string> out;
+  for (int c = 0; c < impl_->d->ncon; ++c) {
+    const mjContact& con = impl_->d->contact[c];
+    const int b1 = m->geom_bodyid[con.geom1];
+    const int b2 = m->geom_bodyid[con.geom2];
+    int other = -1;
+    if (b1 == id) other = b2;
+    if (b2 == id) other = b1;
+    if (other < 0) continue;
+    const char* name = mj_id2name(m, mjOBJ_BODY, other);
+    std::string s = name ? name : "world";
+    if (std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
+  }
+  return out;
+}
+
+const mjModel_* World::mj_model() const { return impl_->m; }
+mjData_* World::mj_data() { return impl_->d; }
+
+}  // namespace toolbench::sim

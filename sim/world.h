@@ -1,0 +1,111 @@
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "common/robot_interface.h"
+
+struct mjModel_;
+struct mjData_;
+
+namespace toolbench::sim {
+
+/// Simulator state that only scoring and tests may read (design.md: perception and control never
+/// see it). Poses of every named body in the world frame W at one instant.
+struct GroundTruth {
+  double time = 0.0;                                  // [s]
+  std::map<std::string, Eigen::Isometry3d> X_WB;      // body name -> pose in W
+  /// Pose of a body; throws std::invalid_argument naming an unknown body.
+  const Eigen::Isometry3d& Pose(std::string_view body) const;
+};
+
+/// Health of the simulation after stepping, from MuJoCo's warning counters.
+struct SimStatus {
+  bool ok = true;            // false once MuJoCo reported instability (NaN/Inf, bad QACC)
+  std::string message;       // the first warning, empty when ok
+};
+
+/// A MuJoCo model and its data: loads MJCF, steps physics, reads encoders and drives the position
+/// servos. Not copyable; movable. Not thread-safe (one World per thread).
+class World {
+ public:
+  /// Compiles MJCF text (asset paths must be absolute). `source` names the input in errors.
+  /// Throws std::invalid_argument with MuJoCo's message when the model does not compile.
+  World(const std::string& mjcf, std::string_view source);
+  ~World();
+  World(World&&) noexcept;
+  World& operator=(World&&) noexcept;
+  World(const World&) = delete;
+  World& operator=(const World&) = delete;
+
+  /// Resets to the named keyframe (the composer writes "home"). Throws on an unknown key.
+  void ResetToKeyframe(std::string_view key = "home");
+  /// Advances physics by `steps` steps. Returns the status (unstable physics is reported, never
+  /// thrown, so a benchmark can record it and go on).
+  SimStatus Step(int steps = 1);
+  /// Advances physics by at least `seconds` of simulated time.
+  SimStatus Advance(double seconds);
+  /// Steps until every free body (tools, ball) moved less than speed_tol * hold over a window of
+  /// `hold` seconds (rotations count at a 0.1 m lever), or `max_time` has passed. Returns true
+  /// when everything came to rest; physics failures show in status().
+  bool SettleFreeBodies(double max_time, double speed_tol = 1e-3, double hold = 0.25);
+  /// Largest linear speed of any free body [m/s].
+  double MaxFreeBodySpeed() const;
+  double time() const;      // simulated time [s]
+  double timestep() const;  // [s]
+  SimStatus status() const;
+
+  /// Actuated joints (one position servo each), in actuator order.
+  const std::vector<std::string>& actuated_joints() const;
+  Eigen::VectorXd JointPositions() const;   // encoders [rad], actuated_joints() order
+  Eigen::VectorXd JointVelocities() const;  // [rad/s]
+  Eigen::VectorXd JointTargets() const;     // current servo targets [rad]
+  /// Sets servo targets; throws std::invalid_argument on a wrong size or non-finite entry.
+  void SetJointTargets(const Eigen::VectorXd& q_target);
+  /// Sets joint positions and targets directly and zeroes their velocities (for setting up a
+  /// test or a posture at time 0; not for use during an episode).
+  void TeleportJoints(const Eigen::VectorXd& q);
+
+  /// Snapshot of all named body poses (ground truth, for scoring and tests only).
+  GroundTruth ground_truth() const;
+  /// Number of active contacts.
+  int num_contacts() const;
+  /// Names of the bodies currently in contact with `body` (ground truth, for scoring/tests).
+  std::vector<std::string> ContactingBodies(std::string_view body) const;
+
+  /// MuJoCo handles for the renderer and benchmarks inside sim/ (opaque elsewhere).
+  const mjModel_* mj_model() const;
+  mjData_* mj_data();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// The simulated robot behind the RobotInterface that control uses.
+class SimRobot : public RobotInterface {
+ public:
+  /// Keeps a reference; `world` must outlive this object.
+  explicit SimRobot(World& world) : world_(world) {}
+  std::vector<std::string> JointNames() const override { return world_.actuated_joints(); }
+  Eigen::VectorXd ReadEncoders() const override { return world_.JointPositions(); }
+  Eigen::VectorXd ReadVelocities() const override { return world_.JointVelocities(); }
+  void SetPositionTargets(const Eigen::VectorXd& q) override { world_.SetJointTargets(q); }
+  Eigen::VectorXd PositionTargets() const override { return world_.JointTargets(); }
+  void Wait(double seconds) override { world_.Advance(seconds); }
+  double Time() const override { return world_.time(); }
+
+ private:
+  World& world_;
+};
+
+/// Installs MuJoCo error/warning handlers that log through spdlog instead of MuJoCo 2.2.2's
+/// default (print "Press Enter", read stdin, exit). Idempotent; World's constructor calls it.
+void InstallMujocoHandlers();
+
+}  // namespace toolbench::sim

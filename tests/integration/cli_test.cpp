@@ -1,0 +1,103 @@
+// The command line: bad input gives a clear message and a non-zero exit, never a crash.
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+namespace {
+
+using ::testing::HasSubstr;
+
+struct CliRun {
+  int code;
+  std::string output;
+};
+
+CliRun Toolbench(const std::string& args) {
+  const std::string cmd = std::string(TOOLBENCH_EXE) + " " + args + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  std::string output;
+  std::array<char, 4096> buffer{};
+  while (size_t n = fread(buffer.data(), 1, buffer.size(), pipe)) output.append(buffer.data(), n);
+  const int status = pclose(pipe);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), output};
+}
+
+std::filesystem::path TempDir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("toolbench_cli_" + name);
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+TEST(CliTest, HelpDescribesCommandsAndDefaults) {
+  const CliRun help = Toolbench("--help");
+  EXPECT_EQ(help.code, 0);
+  EXPECT_THAT(help.output, HasSubstr("render"));
+  EXPECT_THAT(help.output, HasSubstr("scene"));
+  const CliRun render_help = Toolbench("render --help");
+  EXPECT_EQ(render_help.code, 0);
+  EXPECT_THAT(render_help.output, HasSubstr("--seed"));
+  EXPECT_THAT(render_help.output, HasSubstr("--no-noise"));
+}
+
+TEST(CliTest, UnknownToolAndCellAreNamed) {
+  const auto dir = TempDir("unknown");
+  CliRun r = Toolbench("scene --tools spoon_9 --save " + (dir / "s.xml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("spoon_9"));
+  r = Toolbench("scene --tools hoe_1 --cells pos9 --save " + (dir / "s.xml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("pos9"));
+  r = Toolbench("render --seed -3");
+  EXPECT_NE(r.code, 0);
+}
+
+TEST(CliTest, MalformedSceneFileIsNamed) {
+  const auto dir = TempDir("scene");
+  const auto file = dir / "broken.json";
+  FILE* f = std::fopen(file.c_str(), "w");
+  std::fputs("{\"rack\": {\"incline_deg\": 90}}", f);
+  std::fclose(f);
+  const CliRun r = Toolbench("scene --scene " + file.string() + " --save " + (dir / "s.xml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("broken.json"));
+  EXPECT_THAT(r.output, HasSubstr("incline_deg"));
+}
+
+TEST(CliTest, BrokenUserMeshIsNamed) {
+  const auto dir = TempDir("mesh");
+  FILE* f = std::fopen((dir / "bad.stl").c_str(), "w");
+  std::fputs("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n", f);  // truncated
+  std::fclose(f);
+  f = std::fopen((dir / "bad.json").c_str(), "w");
+  std::fputs(R"({"name": "bad", "family": "custom", "mesh": "bad.stl", "mass": 0.2,
+    "handle": {"center": [0,0,0.1], "axis": [0,0,1], "length": 0.1, "radius": 0.015},
+    "effector": {"center": [0,0,0.3], "axis": [0,0,1], "length": 0.1, "radius": 0.02},
+    "symmetries": [], "params": {}, "total_length": 0.4})", f);
+  std::fclose(f);
+  const CliRun r = Toolbench("tools --tool-dir " + dir.string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("bad.stl"));
+}
+
+TEST(CliTest, SceneWritesLoadableMjcf) {
+  const auto dir = TempDir("save");
+  const CliRun r = Toolbench("scene --seed 4 --save " + (dir / "scene.xml").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::file_size(dir / "scene.xml") > 1000);
+}
+
+TEST(CliTest, RenderWritesTheFrameFiles) {
+  const auto dir = TempDir("render");
+  const CliRun r = Toolbench("render --seed 1 --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* file : {"rgb.png", "depth.png", "camera.json", "cloud.ply", "ground_truth.json", "scene.xml"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / file)) << file;
+  }
+}
+
+}  // namespace

@@ -1,0 +1,117 @@
+#include "sim/scene_composer.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "common/paths.h"
+#include "sim/world.h"
+
+namespace toolbench::sim {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+class ComposerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    spec_ = new SceneSpec(LoadSceneSpec(DefaultScenePath()));
+    robot_ = new robot::RobotDescription(robot::LoadRobotDescription(AssetsDir() / spec_->robot));
+    library_ = new std::vector<toollib::ToolModel>(toollib::LoadToolLibrary(AssetsDir() / "tools"));
+    for (const auto& t : *library_) names_.push_back(t.name);
+  }
+  static void TearDownTestSuite() {
+    delete spec_;
+    delete robot_;
+    delete library_;
+  }
+  static SceneSpec* spec_;
+  static robot::RobotDescription* robot_;
+  static std::vector<toollib::ToolModel>* library_;
+  static std::vector<std::string> names_;
+};
+SceneSpec* ComposerTest::spec_ = nullptr;
+robot::RobotDescription* ComposerTest::robot_ = nullptr;
+std::vector<toollib::ToolModel>* ComposerTest::library_ = nullptr;
+std::vector<std::string> ComposerTest::names_;
+
+TEST_F(ComposerTest, SameSeedSamePlanOtherSeedOtherPlan) {
+  const ScenePlan a = PlanScene(*spec_, names_, 11, {});
+  const ScenePlan b = PlanScene(*spec_, names_, 11, {});
+  ASSERT_EQ(a.tools.size(), b.tools.size());
+  for (size_t i = 0; i < a.tools.size(); ++i) {
+    EXPECT_EQ(a.tools[i].tool, b.tools[i].tool);
+    EXPECT_EQ(a.tools[i].cell, b.tools[i].cell);
+    EXPECT_EQ(a.tools[i].offset, b.tools[i].offset);
+  }
+  EXPECT_EQ(a.ball_xy, b.ball_xy);
+  // Some other seed changes the tools or their placement.
+  bool differs = false;
+  for (std::uint64_t seed = 12; seed < 20 && !differs; ++seed) {
+    const ScenePlan c = PlanScene(*spec_, names_, seed, {});
+    differs = c.tools.size() != a.tools.size() || c.tools[0].tool != a.tools[0].tool ||
+              c.tools[0].offset != a.tools[0].offset;
+  }
+  EXPECT_TRUE(differs);
+}
+
+TEST_F(ComposerTest, RandomPlansRespectCountsAndPlaces) {
+  for (std::uint64_t seed = 0; seed < 50; ++seed) {
+    const ScenePlan plan = PlanScene(*spec_, names_, seed, {});
+    ASSERT_GE(plan.tools.size(), 1u);
+    ASSERT_LE(plan.tools.size(), 3u);
+    for (const auto& p : plan.tools) EXPECT_TRUE(IsCellName(p.cell)) << p.cell;
+    EXPECT_GE(plan.ball_xy.x(), spec_->ball.x_range[0]);
+    EXPECT_LE(plan.ball_xy.x(), spec_->ball.x_range[1]);
+  }
+}
+
+TEST_F(ComposerTest, BadRequestsNameTheInput) {
+  EXPECT_THAT([&] { PlanScene(*spec_, names_, 1, {{"spoon_9", "pos1"}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("unknown tool 'spoon_9'")));
+  EXPECT_THAT([&] { PlanScene(*spec_, names_, 1, {{names_[0], "pos7"}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("unknown cell 'pos7'")));
+  EXPECT_THAT([&] { PlanScene(*spec_, names_, 1, {{names_[0], "rot1"}, {names_[1], "pos2"}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("pos2")));
+}
+
+TEST_F(ComposerTest, CellPosesFollowTable53) {
+  const RackSpec& rack = spec_->rack;
+  const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+  EXPECT_TRUE((CellPose(rack, "rot0").linear() * z).isApprox(z));
+  EXPECT_TRUE((CellPose(rack, "rot1").linear() * x).isApprox(Eigen::Vector3d::UnitY()));  // toward robot
+  EXPECT_TRUE((CellPose(rack, "rot2").linear() * z).isApprox(-z));                        // upside down
+  EXPECT_TRUE((CellPose(rack, "rot3").linear() * z).isApprox(-x));                        // across
+  EXPECT_TRUE((CellPose(rack, "rot3").linear() * x).isApprox(z));                         // effector up
+  EXPECT_NEAR(CellPose(rack, "pos1").translation().x(), rack.slot_pos1, 1e-12);
+  // The rack faces the robot: its normal y_K points toward the robot's midline (-y_R).
+  EXPECT_LT(RackPose(rack).linear().col(1).dot(rack.origin.normalized()), -0.8);
+}
+
+TEST_F(ComposerTest, EveryToolInEveryCellComposesAndLoads) {
+  // One tool per scene keeps this fast; placements must put every tool on the ledge in front of
+  // the board (z_K >= 0, y_K >= 0 for all its geometry).
+  for (const auto& tool : *library_) {
+    for (const char* cell : {"pos1", "rot1", "rot2", "rot3"}) {
+      const ScenePlan plan = PlanScene(*spec_, names_, 3, {{tool.name, cell}});
+      const ComposedScene scene = ComposeScene(*spec_, *robot_, *library_, plan);
+      ASSERT_EQ(scene.tools.size(), 1u);
+      const Eigen::Isometry3d X_KT = scene.X_RK.inverse() * scene.tools[0].X_RT;
+      const Eigen::Matrix3Xd p_K = (X_KT.linear() * tool.mesh.vertices).colwise() + X_KT.translation();
+      EXPECT_GT(p_K.row(1).minCoeff(), 0.0) << tool.name << " " << cell << " intersects the board";
+      EXPECT_GT(p_K.row(2).minCoeff(), 0.0) << tool.name << " " << cell << " intersects the ledge";
+      EXPECT_LT(p_K.row(1).minCoeff(), 0.01) << tool.name << " " << cell << " floats off the board";
+    }
+  }
+  const ScenePlan plan = PlanScene(*spec_, names_, 5, {});
+  EXPECT_NO_THROW(World(ComposeScene(*spec_, *robot_, *library_, plan).mjcf, "seed 5"));
+}
+
+TEST_F(ComposerTest, BrokenMjcfIsReportedWithSource) {
+  EXPECT_THAT([] { World("<mujoco><worldbody><geom type='box'/></worldbody>", "broken.xml"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("broken.xml")));
+}
+
+}  // namespace
+}  // namespace toolbench::sim

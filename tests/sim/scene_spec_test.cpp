@@ -1,0 +1,54 @@
+#include "sim/scene_spec.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+namespace toolbench::sim {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+TEST(SceneSpecTest, DefaultFileParses) {
+  const SceneSpec spec = LoadSceneSpec(DefaultScenePath());
+  EXPECT_EQ(spec.name, "default");
+  EXPECT_DOUBLE_EQ(spec.physics.timestep, 0.002);
+}
+
+TEST(SceneSpecTest, EmptyObjectGivesDefaults) {
+  const SceneSpec spec = ParseSceneSpec("{}", "inline");
+  EXPECT_EQ(spec.robot, "robots/icub_upper_body.json");
+  EXPECT_EQ(spec.tools.max_count, 3);
+}
+
+TEST(SceneSpecTest, OverridesFields) {
+  const SceneSpec spec = ParseSceneSpec(
+      R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]}})",
+      "inline");
+  EXPECT_DOUBLE_EQ(spec.rack.incline_deg, 20);
+  EXPECT_DOUBLE_EQ(spec.ball.radius, 0.04);
+  EXPECT_EQ(spec.tools.choices, std::vector<std::string>{"hoe_1"});
+}
+
+TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
+  EXPECT_THAT([] { ParseSceneSpec("{\"rack\": ", "bad.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("bad.json"), HasSubstr("not valid JSON"))));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"rack": {"inclne_deg": 3}})", "typo.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("typo.json"), HasSubstr("rack.inclne_deg"))));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"ball": {"radius": "big"}})", "type.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("ball.radius' must be a number")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"ball": {"radius": -1}})", "range.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("range.json"), HasSubstr("ball.radius"))));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"robot_base": [0, 0]})", "size.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"cone": "round"}})", "cone.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("round")));
+  EXPECT_THAT([] { ParseSceneSpec("[1, 2]", "array.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("must be an object")));
+  EXPECT_THAT([] { LoadSceneSpec("/nonexistent/scene.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/scene.json")));
+}
+
+}  // namespace
+}  // namespace toolbench::sim

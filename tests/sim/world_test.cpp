@@ -1,0 +1,141 @@
+#include "sim/world.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <mujoco/mujoco.h>
+
+#include "common/paths.h"
+#include "common/rng.h"
+#include "sim/scene_composer.h"
+
+namespace toolbench::sim {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+class WorldTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    spec_ = new SceneSpec(LoadSceneSpec(DefaultScenePath()));
+    robot_ = new robot::RobotDescription(robot::LoadRobotDescription(AssetsDir() / spec_->robot));
+    library_ = new std::vector<toollib::ToolModel>(toollib::LoadToolLibrary(AssetsDir() / "tools"));
+    for (const auto& t : *library_) names_.push_back(t.name);
+  }
+  static void TearDownTestSuite() {
+    delete spec_;
+    delete robot_;
+    delete library_;
+  }
+  ComposedScene Compose(std::uint64_t seed, const std::vector<ToolPlacement>& tools = {}) const {
+    return ComposeScene(*spec_, *robot_, *library_, PlanScene(*spec_, names_, seed, tools));
+  }
+  static SceneSpec* spec_;
+  static robot::RobotDescription* robot_;
+  static std::vector<toollib::ToolModel>* library_;
+  static std::vector<std::string> names_;
+};
+SceneSpec* WorldTest::spec_ = nullptr;
+robot::RobotDescription* WorldTest::robot_ = nullptr;
+std::vector<toollib::ToolModel>* WorldTest::library_ = nullptr;
+std::vector<std::string> WorldTest::names_;
+
+// One source of truth: forward kinematics of the URDF equals MuJoCo's body poses.
+TEST_F(WorldTest, UrdfKinematicsEqualsMujocoBodyPoses) {
+  const ComposedScene scene = Compose(1);
+  World world(scene.mjcf, "fk");
+  ASSERT_EQ(world.actuated_joints(), robot_->model.JointNames());
+  Rng rng(DeriveSeed(1, "fk_test"));
+  constexpr double kTol = 1e-6;
+  for (int trial = 0; trial < 100; ++trial) {
+    Eigen::VectorXd q(robot_->model.num_q());
+    for (int i = 0; i < q.size(); ++i) {
+      const auto& joint = robot_->model.joints[robot_->model.movable_joints[i]];
+      q[i] = UniformReal(rng, joint.lower, joint.upper);
+    }
+    world.TeleportJoints(q);
+    ASSERT_TRUE(world.JointPositions().isApprox(q, 1e-12));
+    const GroundTruth truth = world.ground_truth();
+    const std::vector<Eigen::Isometry3d> X_RL = robot::LinkPoses(robot_->model, q);
+    for (size_t l = 0; l < robot_->model.links.size(); ++l) {
+      const Eigen::Isometry3d X_WL = scene.X_WR * X_RL[l];
+      const Eigen::Isometry3d& X_WB = truth.Pose(robot_->model.links[l].name);
+      ASSERT_LT((X_WL.translation() - X_WB.translation()).norm(), kTol) << robot_->model.links[l].name;
+      ASSERT_LT((X_WL.linear() - X_WB.linear()).norm(), kTol) << robot_->model.links[l].name;
+    }
+  }
+}
+
+// Physics at rest holds still: after settling, tools drift < 1 mm in 2 s and the ball stays put.
+TEST_F(WorldTest, ToolsAndBallStayPutAtRest) {
+  for (std::uint64_t seed : {1, 2, 3, 4, 5, 6}) {
+    const ComposedScene scene = Compose(seed);
+    World world(scene.mjcf, "rest");
+    ASSERT_TRUE(world.SettleFreeBodies(spec_->physics.settle_time)) << "seed " << seed;
+    const GroundTruth before = world.ground_truth();
+    ASSERT_TRUE(world.Advance(2.0).ok) << world.status().message;
+    const GroundTruth after = world.ground_truth();
+    for (const auto& tool : scene.tools) {
+      const double drift = (after.Pose(tool.body).translation() - before.Pose(tool.body).translation()).norm();
+      EXPECT_LT(drift, 1e-3) << "seed " << seed << ": " << tool.name << " in " << tool.cell;
+      // Still on the rack: not fallen to the floor.
+      EXPECT_GT(after.Pose(tool.body).translation().z(), 0.3) << tool.name;
+    }
+    EXPECT_LT((after.Pose("ball").translation() - before.Pose("ball").translation()).norm(), 1e-3);
+  }
+}
+
+TEST_F(WorldTest, EveryCellSettlesOnTheRack) {
+  // Table 5.3 cells for every tool: after settling the tool rests on the rack (not the floor)
+  // and then holds still.
+  for (const auto& tool : *library_) {
+    for (std::string_view cell_view : kCellNames) {
+      const std::string cell(cell_view);
+      const ComposedScene scene = Compose(1, {{tool.name, cell}});
+      World world(scene.mjcf, "cell");
+      EXPECT_TRUE(world.SettleFreeBodies(spec_->physics.settle_time)) << tool.name << " " << cell << " never comes to rest";
+      const Eigen::Vector3d p0 = world.ground_truth().Pose(scene.tools[0].body).translation();
+      world.Advance(1.0);
+      const Eigen::Vector3d p1 = world.ground_truth().Pose(scene.tools[0].body).translation();
+      EXPECT_LT((p1 - p0).norm(), 1e-3) << tool.name << " in " << cell << " still moves";
+      EXPECT_GT(p1.z(), 0.3) << tool.name << " in " << cell << " fell off the rack";
+    }
+  }
+}
+
+TEST_F(WorldTest, SameSeedSameTrajectoryBitForBit) {
+  auto run = [&] {
+    World world(Compose(9).mjcf, "det");
+    Eigen::VectorXd target = world.JointTargets();
+    target[0] += 0.3;
+    world.SetJointTargets(target);
+    world.Advance(0.5);
+    return Eigen::Map<const Eigen::VectorXd>(world.mj_data()->qpos, world.mj_model()->nq).eval();
+  };
+  const Eigen::VectorXd a = run();
+  const Eigen::VectorXd b = run();
+  EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST_F(WorldTest, ServosHoldHomeAgainstGravity) {
+  World world(Compose(1).mjcf, "servo");
+  const Eigen::VectorXd home = world.JointTargets();
+  world.Advance(1.0);
+  const Eigen::VectorXd error = (world.JointPositions() - home).cwiseAbs();
+  EXPECT_LT(error.maxCoeff(), 1.5 * M_PI / 180.0) << error.transpose();
+}
+
+TEST_F(WorldTest, BadTargetsAreRejected) {
+  World world(Compose(1).mjcf, "bad");
+  EXPECT_THAT([&] { world.SetJointTargets(Eigen::VectorXd::Zero(2)); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("actuated joints")));
+  Eigen::VectorXd nan = world.JointTargets();
+  nan[0] = NAN;
+  EXPECT_THAT([&] { world.SetJointTargets(nan); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("non-finite")));
+  EXPECT_THAT([&] { world.ResetToKeyframe("nope"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("nope")));
+}
+
+}  // namespace
+}  // namespace toolbench::sim
