@@ -94,6 +94,18 @@ void WriteFrame(const std::filesystem::path& dir, const RgbdFrame& frame,
   if (!cv::imwrite((dir / "depth.png").string(), depth_mm)) {
     throw std::runtime_error(Cat("cannot write '", (dir / "depth.png").string(), "'"));
   }
+  // For people: depth as a colour map (near = warm), black where there is no return.
+  {
+    cv::Mat valid = frame.depth > 0;
+    double z_min = 0, z_max = 1;
+    cv::minMaxLoc(frame.depth, &z_min, &z_max, nullptr, nullptr, valid);
+    cv::Mat scaled;
+    frame.depth.convertTo(scaled, CV_8U, -255.0 / std::max(1e-6, z_max - z_min), 255.0 * z_max / std::max(1e-6, z_max - z_min));
+    cv::Mat vis;
+    cv::applyColorMap(scaled, vis, cv::COLORMAP_TURBO);
+    vis.setTo(cv::Scalar(0, 0, 0), ~valid);
+    cv::imwrite((dir / "depth_vis.png").string(), vis);
+  }
   const CameraIntrinsics& K = frame.intrinsics;
   nlohmann::json camera = extra;
   camera["time"] = frame.time;

@@ -11,6 +11,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "app/bench.h"
 #include "app/frame_io.h"
 #include "app/scene_setup.h"
 #include "common/check.h"
@@ -23,23 +24,27 @@ namespace {
 
 using namespace toolbench;
 
-/// Options shared by every command that builds a scene.
-void AddSceneOptions(CLI::App* cmd, app::SceneRequest& request) {
-  // Parsed as a string: CLI11 would wrap "-3" into a huge unsigned number.
+/// --seed as a non-negative integer (parsed from text: CLI11 would wrap "-3" into a huge number).
+void AddSeedOption(CLI::App* cmd, std::uint64_t& seed) {
   cmd->add_option_function<std::string>(
          "--seed",
-         [&request](const std::string& text) {
+         [&seed](const std::string& text) {
            if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos) {
              throw CLI::ValidationError("--seed", "must be a non-negative integer, got '" + text + "'");
            }
            try {
-             request.seed = std::stoull(text);
+             seed = std::stoull(text);
            } catch (const std::exception&) {
              throw CLI::ValidationError("--seed", "out of range: '" + text + "'");
            }
          },
-         "Seed of every random draw (tools, ball, sensor noise), a non-negative integer")
-      ->default_str("1");
+         "Seed of every random draw (a non-negative integer)")
+      ->default_str(std::to_string(seed));
+}
+
+/// Options shared by every command that builds a scene.
+void AddSceneOptions(CLI::App* cmd, app::SceneRequest& request) {
+  AddSeedOption(cmd, request.seed);
   cmd->add_option("--scene", request.scene_file,
                   "Scene file (JSON); default: scenes/default.json in the source tree")
       ->check(CLI::ExistingFile);
@@ -210,6 +215,28 @@ int main(int argc, char** argv) {
   tools->add_option("--scene", list_scene, "Scene file naming the library folders")
       ->check(CLI::ExistingFile);
 
+  app::BenchRequest bench_request;
+  std::string shard = "0/1";
+  CLI::App* bench = cli.add_subcommand(
+      "bench", "Run a benchmark protocol; writes summary.json (and per-case results) to --out. "
+               "Failed cases are recorded with their reason, never dropped");
+  {
+    std::string protocols;
+    std::vector<std::string> names;
+    for (const auto& p : app::BenchProtocols()) {
+      protocols += "\n  " + p.name + ": " + p.description;
+      names.push_back(p.name);
+    }
+    bench->add_option("--protocol", bench_request.protocol, "Protocol to run:" + protocols)->required();
+    bench->add_option("--out", bench_request.out_dir, "Output folder")->required();
+    AddSeedOption(bench, bench_request.seed);
+    bench->add_option("--shard", shard, "Run slice i of N (i/N, 0-based); merge the results afterwards")
+        ->capture_default_str();
+    bench->add_option("--limit", bench_request.limit, "Run at most this many cases (0 = all)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+  }
+
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -224,6 +251,17 @@ int main(int argc, char** argv) {
     }
     if (scene->parsed()) return RunScene(scene_request, scene_save);
     if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
+    if (bench->parsed()) {
+      const auto slash = shard.find('/');
+      try {
+        if (slash == std::string::npos) throw std::invalid_argument("no slash");
+        bench_request.shard_index = std::stoi(shard.substr(0, slash));
+        bench_request.shard_count = std::stoi(shard.substr(slash + 1));
+      } catch (const std::exception&) {
+        throw std::invalid_argument("--shard '" + shard + "' is not of the form i/N");
+      }
+      return app::RunBench(bench_request);
+    }
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -39,9 +39,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const toolbench::toollib::TriangleMesh mesh = toolbench::toollib::ReadMesh(path);
     const toolbench::toollib::MeshReport report = toolbench::toollib::ValidateMesh(mesh);
     if (report.valid) {
-      // Valid meshes satisfy the preconditions of the geometry functions.
+      // A valid mesh encloses volume, so this must not throw. (HasSelfIntersections is left
+      // out: it lives in the CGAL translation unit, which this target does not build.)
       (void)toolbench::toollib::Centroid(mesh);
-      (void)toolbench::toollib::HasSelfIntersections(mesh);
     }
     toolbench::toollib::RequireValidMesh(mesh, path.string());
   } catch (const std::invalid_argument&) {

@@ -128,6 +128,22 @@ RobotDescription LoadRobotDescription(const std::filesystem::path& sidecar_json)
       }
     }
     d.hand_open = JointMap(doc, "hand_open", sidecar_json, d.model, 1.0);
+    d.hand_preshape = doc.contains("hand_preshape")
+                          ? JointMap(doc, "hand_preshape", sidecar_json, d.model, 1.0)
+                          : d.hand_open;
+    if (doc.contains("grasp")) {
+      const json& g = doc.at("grasp");
+      const auto c = Field(g, "handle_axis_center", sidecar_json).get<std::vector<double>>();
+      const auto a = Field(g, "handle_axis", sidecar_json).get<std::vector<double>>();
+      if (c.size() != 3 || a.size() != 3) ThrowInvalid("grasp: centre and axis need 3 numbers");
+      d.grasp.center = Eigen::Vector3d(c[0], c[1], c[2]);
+      d.grasp.axis = Eigen::Vector3d(a[0], a[1], a[2]).normalized();
+      d.grasp.radius = Field(g, "handle_radius", sidecar_json).get<double>();
+      d.grasp.length = Field(g, "handle_length", sidecar_json).get<double>();
+      if (StringField(g, "frame", sidecar_json) != d.palm_frame) {
+        ThrowInvalid("grasp.frame must be the palm frame '", d.palm_frame, "'");
+      }
+    }
     d.hand_closed = JointMap(doc, "hand_closed", sidecar_json, d.model, 1.0);
     d.home = JointMap(doc, "home_deg", sidecar_json, d.model, std::numbers::pi / 180.0);
   } catch (const json::exception& e) {

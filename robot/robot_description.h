@@ -24,6 +24,15 @@ struct ActuatorSpec {
   double armature = 0.0;  // reflected rotor inertia [kg m^2], >= 0
 };
 
+/// Where the hand holds a handle: a cylinder of the given size whose axis passes through `center`
+/// along `axis`, both in the palm frame P (thesis section 4.4.4: 32 mm x 80 mm).
+struct GraspSpec {
+  Eigen::Vector3d center{0.0, 0.0, 0.03};  // p_PH, handle axis centre in P [m]
+  Eigen::Vector3d axis{0.0, 1.0, 0.0};     // unit handle axis in P
+  double radius = 0.016;                   // [m]
+  double length = 0.08;                    // [m]
+};
+
 /// Everything the bench knows about a robot: the URDF (the one source of kinematic truth) and a
 /// JSON sidecar with what URDF cannot say (servo gains, hand groups, named postures, frames).
 struct RobotDescription {
@@ -36,7 +45,9 @@ struct RobotDescription {
   CameraSpec camera;
   std::map<std::string, ActuatorSpec> actuators;               // by joint name, every movable joint
   std::map<std::string, std::vector<std::string>> hand_groups;  // group -> joints closing the hand
+  GraspSpec grasp;                            // the hand's grasp cylinder
   std::map<std::string, double> hand_open;    // joint -> [rad]
+  std::map<std::string, double> hand_preshape;  // joint -> [rad], before closing (thumb opposed)
   std::map<std::string, double> hand_closed;  // joint -> [rad]
   std::map<std::string, double> home;         // joint -> [rad] (sidecar stores degrees)
 

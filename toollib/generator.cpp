@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <numbers>
+#include <numeric>
 #include <optional>
 #include <queue>
 #include <string>
@@ -412,10 +413,33 @@ std::optional<TriangleMesh> FinishMesh(const TriangleMesh& raw, const std::strin
   for (Eigen::Index i = 0; i < raw.vertices.cols(); ++i) {
     points.push_back(RoundToFloat(raw.vertices.col(i)));
   }
+  // CGAL's output order depends on memory addresses (it differs between an ASan and a
+  // release build), so sort vertices by position and faces by vertices first: the result then
+  // depends on the geometry alone.
+  std::vector<int> order(points.size());
+  std::iota(order.begin(), order.end(), 0);
+  const auto position = [&](int i) {
+    const Vector3d& p = points[static_cast<std::size_t>(i)];
+    return std::array<double, 3>{p.x(), p.y(), p.z()};
+  };
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return position(a) < position(b); });
+  std::vector<int> rank(points.size());
+  std::vector<Vector3d> sorted_points;
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    rank[static_cast<std::size_t>(order[i])] = static_cast<int>(i);
+    sorted_points.push_back(points[static_cast<std::size_t>(order[i])]);
+  }
+  points = std::move(sorted_points);
   std::vector<std::array<int, 3>> faces;
   for (Eigen::Index f = 0; f < raw.faces.cols(); ++f) {
-    faces.push_back({raw.faces(0, f), raw.faces(1, f), raw.faces(2, f)});
+    std::array<int, 3> t{rank[static_cast<std::size_t>(raw.faces(0, f))],
+                         rank[static_cast<std::size_t>(raw.faces(1, f))],
+                         rank[static_cast<std::size_t>(raw.faces(2, f))]};
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());  // keeps orientation
+    faces.push_back(t);
   }
+  std::sort(faces.begin(), faces.end());
   RefineLongEdges(points, faces, kMaxEdge);
 
   std::vector<int> new_index(points.size(), -1);

@@ -23,7 +23,7 @@ namespace toolbench::toollib {
 ///  - `handle`: the graspable cylinder (diameter 20-35 mm), axis +z, centre mid-handle;
 ///  - `effector`: centre and main direction of the working part (see assets/tools/README.md);
 ///  - `total_length` in 0.25-0.60 m and the generator `params` in SI units.
-/// Takes about a second (CGAL exact unions).
+/// Takes about half a second (CGAL exact unions on 2 cores).
 std::vector<ToolModel> GenerateToolLibrary();
 
 /// Generates the library and saves every tool with SaveToolModel into `dir` (created if

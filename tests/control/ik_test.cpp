@@ -1,0 +1,114 @@
+#include "control/ik.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "common/rng.h"
+#include "robot/robot_description.h"
+
+namespace toolbench::control {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+constexpr double kPosTol = 1e-3;                // success criterion of issue 4 [m]
+constexpr double kRotTol = 2.0 * M_PI / 180.0;  // [rad]
+
+class IkTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    robot_ = new robot::RobotDescription(robot::LoadRobotDescription(robot::DefaultRobotSidecar()));
+    chain_ = new KinematicChain(MakeRightArmChain(robot_->model));
+  }
+  static void TearDownTestSuite() {
+    delete chain_;
+    delete robot_;
+  }
+  // A random in-limit posture of the arm chain, other joints at home.
+  static Eigen::VectorXd RandomArmQ(Rng& rng) {
+    Eigen::VectorXd q_chain(chain_->num_joints());
+    for (int i = 0; i < q_chain.size(); ++i) q_chain[i] = UniformReal(rng, chain_->lower()[i], chain_->upper()[i]);
+    return chain_->ModelQ(robot_->HomeQ(), q_chain);
+  }
+  static robot::RobotDescription* robot_;
+  static KinematicChain* chain_;
+};
+robot::RobotDescription* IkTest::robot_ = nullptr;
+KinematicChain* IkTest::chain_ = nullptr;
+
+TEST_F(IkTest, SolvesReachableTargetsWithinTolerance) {
+  CartesianSolver solver(*chain_, robot_->HomeQ());
+  Rng rng(DeriveSeed(1, "ik_test_reachable"));
+  for (int trial = 0; trial < 100; ++trial) {
+    const Eigen::VectorXd q_goal = RandomArmQ(rng);
+    const Eigen::Isometry3d X_RT = chain_->TipPose(q_goal);
+    const IkResult result = solver.Solve(X_RT, robot_->HomeQ());
+    ASSERT_EQ(result.status, IkStatus::kConverged)
+        << "goal [deg] " << (chain_->ChainQ(q_goal) * 180 / M_PI).transpose() << "\ngot [deg] "
+        << (chain_->ChainQ(result.q) * 180 / M_PI).transpose() << "\ntrial " << trial << ": " << ToString(result.status) << " pos " << result.position_error_m << " rot "
+        << result.orientation_error_rad;
+    // Check independently with the URDF forward kinematics, and the limits and untouched joints.
+    const Eigen::Isometry3d X_RP = robot::LinkPose(robot_->model, result.q, robot_->palm_frame);
+    EXPECT_LT((X_RP.translation() - X_RT.translation()).norm(), kPosTol);
+    EXPECT_LT(OrientationError(X_RT.linear(), X_RP.linear()).norm(), kRotTol);
+    EXPECT_NEAR((X_RP.translation() - X_RT.translation()).norm(), result.position_error_m, 1e-9);
+    const Eigen::VectorXd q_chain = chain_->ChainQ(result.q);
+    EXPECT_TRUE((q_chain.array() >= chain_->lower().array() - 1e-9).all());
+    EXPECT_TRUE((q_chain.array() <= chain_->upper().array() + 1e-9).all());
+    const Eigen::VectorXd untouched = chain_->ModelQ(result.q, chain_->ChainQ(robot_->HomeQ()));
+    EXPECT_TRUE(untouched.isApprox(robot_->HomeQ(), 0.0) || untouched == robot_->HomeQ());
+  }
+}
+
+TEST_F(IkTest, PlainIpoptBaselineAlsoSolvesANearTarget) {
+  IkOptions options;
+  options.presolve = false;
+  CartesianSolver solver(*chain_, robot_->HomeQ(), options);
+  Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());
+  X_RT.translation() += Eigen::Vector3d(-0.03, 0.02, 0.02);
+  const IkResult result = solver.Solve(X_RT, robot_->HomeQ());
+  EXPECT_EQ(result.status, IkStatus::kConverged) << ToString(result.status);
+  EXPECT_LT(result.position_error_m, kPosTol);
+  EXPECT_GT(result.ipopt_iterations, 0);
+}
+
+TEST_F(IkTest, UnreachableTargetsAreReportedNotThrown) {
+  CartesianSolver solver(*chain_, robot_->HomeQ());
+  const Eigen::Isometry3d X_home = chain_->TipPose(robot_->HomeQ());
+  // 1.5 m in front of the robot (root -x is forward), and behind its back (+x).
+  for (const Eigen::Vector3d& p : {Eigen::Vector3d(-1.5, 0.1, 0.1), Eigen::Vector3d(0.35, 0.05, 0.05)}) {
+    Eigen::Isometry3d X_RT = X_home;
+    X_RT.translation() = p;
+    const IkResult result = solver.Solve(X_RT, robot_->HomeQ());
+    EXPECT_NE(result.status, IkStatus::kConverged) << p.transpose();
+    EXPECT_GT(result.position_error_m, 0.01) << p.transpose();
+    EXPECT_EQ(result.q.size(), robot_->model.num_q());
+    EXPECT_TRUE(result.q.allFinite());
+  }
+}
+
+TEST_F(IkTest, BadInputIsNamed) {
+  CartesianSolver solver(*chain_, robot_->HomeQ());
+  Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());
+  X_RT.translation().x() = NAN;
+  EXPECT_THAT([&] { solver.Solve(X_RT, robot_->HomeQ()); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("X_BT_target")));
+  EXPECT_THAT([&] { solver.Solve(chain_->TipPose(robot_->HomeQ()), Eigen::VectorXd::Zero(4)); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("q_current has 4 entries")));
+  Eigen::Isometry3d skewed = Eigen::Isometry3d::Identity();
+  skewed.linear() << 2, 0, 0, 0, 1, 0, 0, 0, 1;
+  EXPECT_THAT([&] { solver.Solve(skewed, robot_->HomeQ()); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("not a rotation")));
+  IkOptions options;
+  options.position_tolerance_m = -1.0;
+  EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("position_tolerance_m")));
+  options = {};
+  options.rest_weights["neck_yaw"] = 1.0;
+  EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("neck_yaw")));
+}
+
+}  // namespace
+}  // namespace toolbench::control
