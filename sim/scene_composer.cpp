@@ -20,6 +20,8 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr double kPlacementGap = 0.002;  // clearance left between a placed tool and the rack [m]
+constexpr double kRailHalfHeight = 0.01;  // the rail is 2 cm tall [m]
+constexpr double kStopHeight = 0.02;      // the stop on the ledge is 2 cm tall [m]
 
 /// Formats numbers compactly and exactly enough for MJCF (9 significant digits).
 std::string Num(double v) {
@@ -398,7 +400,7 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
   w.Line(2, "<default class=\"robot_collision\"><geom contype=\"1\" conaffinity=\"0\" group=\"3\" density=\"0\" condim=\"4\" friction=\"1.2 0.01 0.001\" rgba=\"0.4 0.6 0.9 0.5\"/></default>");
   w.Line(2, "<default class=\"world\"><geom contype=\"1\" conaffinity=\"1\" group=\"0\" friction=\"0.8 0.005 0.0001\"/></default>");
   w.Line(2, "<default class=\"tool_visual\"><geom contype=\"0\" conaffinity=\"0\" group=\"0\" density=\"0\"/></default>");
-  w.Line(2, "<default class=\"tool_collision\"><geom contype=\"1\" conaffinity=\"1\" group=\"3\" condim=\"4\" friction=\"1.0 0.01 0.001\" rgba=\"0.9 0.6 0.2 0.5\"/></default>");
+  w.Line(2, "<default class=\"tool_collision\"><geom contype=\"1\" conaffinity=\"1\" group=\"3\" condim=\"6\" friction=\"1.0 0.01 0.002\" rgba=\"0.9 0.6 0.2 0.5\"/></default>");
   w.Line(2, "<default class=\"frame\"><site size=\"0.005\" group=\"5\" rgba=\"1 0 0 1\"/></default>");
   w.Line(1, "</default>");
 
@@ -479,6 +481,16 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                   "\" pos=\"" + Vec(Eigen::Vector3d(0, rack.ledge_depth + 0.005, rack.lip_height / 2 - 0.01)) +
                   "\" rgba=\"0.70 0.70 0.68 1\"/>");
   }
+  if (rack.standoff > 0) {
+    w.Line(3, "<geom name=\"rack_rail\" class=\"world\" type=\"box\" size=\"" +
+                  Vec(Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kRailHalfHeight)) + "\" pos=\"" +
+                  Vec(Eigen::Vector3d(0, rack.standoff / 2, rack.rail_height)) +
+                  "\" rgba=\"0.55 0.55 0.53 1\" friction=\"1.5 0.02 0.001\"/>");
+    w.Line(3, "<geom name=\"rack_stop\" class=\"world\" type=\"box\" size=\"" +
+                  Vec(Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kStopHeight / 2)) + "\" pos=\"" +
+                  Vec(Eigen::Vector3d(0, rack.standoff / 2, kStopHeight / 2)) +
+                  "\" rgba=\"0.55 0.55 0.53 1\" friction=\"1.5 0.02 0.001\"/>");
+  }
   {
     // Posts: vertical in the world, from the ledge down to the floor, behind the board.
     const double ledge_height_W = X_WK.translation().z();
@@ -513,8 +525,19 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
     const Eigen::Matrix3d& R = X_KT.linear();
     const double min_x = -Support(tool, R, -Eigen::Vector3d::UnitX());
     const double max_x = Support(tool, R, Eigen::Vector3d::UnitX());
-    const double min_y = -Support(tool, R, -Eigen::Vector3d::UnitY());
     const double min_z = -Support(tool, R, -Eigen::Vector3d::UnitZ());
+    // Distance from the board: where the tool passes the rail or the ledge stop it must clear
+    // their front face (standoff), elsewhere the board itself (y_K = 0).
+    const double z_shift = kPlacementGap - min_z;
+    double y_shift = -std::numeric_limits<double>::infinity();
+    for (Eigen::Index v = 0; v < tool.mesh.vertices.cols(); ++v) {
+      const Eigen::Vector3d p = R * tool.mesh.vertices.col(v);
+      const double z = p.z() + z_shift;
+      const bool at_rail = std::abs(z - rack.rail_height) < kRailHalfHeight + 0.005;
+      const bool at_stop = z < kStopHeight + 0.005;
+      y_shift = std::max(y_shift, ((at_rail || at_stop) ? rack.standoff : 0.0) - p.y());
+    }
+    y_shift = std::max(y_shift, Support(tool, R, -Eigen::Vector3d::UnitY()));  // parts clear the board
     double x = X_KT.translation().x() + p.offset - (min_x + max_x) / 2;
     // Keep tools apart: push this one out of any interval already taken, away from the centre.
     for (const auto& [lo, hi] : occupied) {
@@ -527,7 +550,7 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                    "' does not fit on the rack beside the other tools");
     }
     occupied.emplace_back(x + min_x, x + max_x);
-    X_KT.translation() = Eigen::Vector3d(x, kPlacementGap - min_y, kPlacementGap - min_z);
+    X_KT.translation() = Eigen::Vector3d(x, kPlacementGap + y_shift, z_shift);
 
     PlacedTool placed;
     placed.name = tool.name;

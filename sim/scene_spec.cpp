@@ -109,6 +109,10 @@ void SceneSpec::Validate() const {
   Require(rack.height > 0, "rack.height", rack.height, "> 0");
   Require(rack.ledge_depth > 0, "rack.ledge_depth", rack.ledge_depth, "> 0");
   Require(rack.lip_height >= 0, "rack.lip_height", rack.lip_height, ">= 0");
+  Require(rack.standoff >= 0 && rack.standoff < rack.ledge_depth - 0.02, "rack.standoff",
+          rack.standoff, "in [0, ledge_depth - 0.02)");
+  Require(rack.rail_height > 0 && rack.rail_height < rack.height, "rack.rail_height",
+          rack.rail_height, "in (0, height)");
   for (double slot : {rack.slot_pos1, rack.slot_pos2, rack.slot_pos3}) {
     Require(std::abs(slot) < rack.width / 2, "rack.slot_pos*", slot, "inside the rack width");
   }
@@ -167,6 +171,8 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Number("height", spec.rack.height);
     r.Number("ledge_depth", spec.rack.ledge_depth);
     r.Number("lip_height", spec.rack.lip_height);
+    r.Number("standoff", spec.rack.standoff);
+    r.Number("rail_height", spec.rack.rail_height);
     r.Number("slot_pos1", spec.rack.slot_pos1);
     r.Number("slot_pos2", spec.rack.slot_pos2);
     r.Number("slot_pos3", spec.rack.slot_pos3);

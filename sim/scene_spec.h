@@ -38,8 +38,11 @@ struct RackSpec {
   double incline_deg = 25.0;   // board tilt away from the robot, from vertical [deg], [0, 45]
   double width = 0.56;         // along x_K [m], > 0
   double height = 0.55;        // along z_K [m], > 0
-  double ledge_depth = 0.11;   // along y_K [m], > 0
-  double lip_height = 0.03;    // ledge lip along z_K [m], >= 0
+  double ledge_depth = 0.20;   // along y_K [m], > 0; deep enough for a rake head lying across
+  double lip_height = 0.0;     // ledge lip along z_K [m], >= 0 (0: none; wide effectors overhang)
+  double standoff = 0.05;      // tools rest this far in front of the board, on a rail and a
+                               // stop on the ledge, so fingers fit behind a handle [m], >= 0
+  double rail_height = 0.18;   // z_K of the rail's centre [m], > 0
   double slot_pos1 = -0.17;    // x_K of place pos1 [m] (the end away from the table)
   double slot_pos2 = 0.0;      // x_K of place pos2 [m] (central place, used by rot0..rot3)
   double slot_pos3 = 0.17;     // x_K of place pos3 [m] (the end near the table)

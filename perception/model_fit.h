@@ -1,0 +1,204 @@
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "toollib/mesh.h"
+#include "toollib/tool_model.h"
+
+namespace toolbench::perception {
+
+/// Points sampled on a mesh surface, with the unit outward normal of the face each came from.
+/// Both are in the mesh's frame (the tool frame T for library tools) [m].
+struct SurfaceSamples {
+  Eigen::Matrix3Xf points;   // 3 x N sample positions [m]
+  Eigen::Matrix3Xf normals;  // 3 x N unit outward face normals
+};
+
+/// Area-weighted uniform sampling of a triangle mesh (thesis 2.3.4): a face is picked with
+/// probability proportional to its area, then a point uniformly inside it (square-root
+/// barycentric trick). Same mesh, count and seed give bit-identical samples on every platform
+/// (draws use toolbench::UniformReal on an Rng seeded with `seed`).
+/// Throws std::invalid_argument when `count` <= 0, the mesh has no faces, a face index is out
+/// of range, or the total area is zero.
+SurfaceSamples SampleSurface(const toollib::TriangleMesh& mesh, int count, std::uint64_t seed);
+
+/// Error metric ICP minimises.
+enum class IcpMetric {
+  kPointToPoint,  // pcl::IterativeClosestPoint, the thesis's baseline
+  kPointToPlane,  // pcl::IterativeClosestPoint with a damped point-to-plane step (model normals
+                  // from the mesh faces): slides along the handle far better than point-to-point
+};
+
+/// Configuration of the model-to-cloud fit. The ICP stopping criteria are the thesis's
+/// Algorithm 4 (500 iterations, transformation epsilon 1e-9, Euclidean fitness epsilon 1e-6);
+/// the thesis's baseline is `metric = kPointToPoint, try_flips = false, visible_rounds = 0`
+/// (with our principal-axes initial guess; the thesis's own initial guess is not stated). The
+/// candidate search, the point-to-plane metric and the visible-surface rounds are additions.
+struct ModelFitOptions {
+  IcpMetric metric = IcpMetric::kPointToPlane;  // see IcpMetric
+  int model_points = 4000;                 // samples on the library mesh (thesis: 4000), > 0
+  std::uint64_t sample_seed = 1;           // seed of the model sampling
+  int max_observed_points = 2000;          // the observed cloud is subsampled (evenly, by index)
+                                           // to at most this many points for ICP, >= 10
+  int max_iterations = 500;                // ICP iteration cap of the final fit (thesis), > 0
+  double transformation_epsilon = 1e-9;    // ICP convergence on the transform change (thesis), >= 0
+  double euclidean_fitness_epsilon = 1e-6;  // ICP convergence on the MSE change (thesis), >= 0
+  double max_correspondence_distance = 0.05;  // ICP pairs farther apart are ignored [m], > 0
+  int coarse_points = 300;                 // observed points used to rank the candidates, >= 10
+  int coarse_iterations = 40;              // ICP cap for scoring each initial candidate, > 0
+  bool try_flips = true;                   // false: only the principal-axes alignment (no flips)
+  int visible_rounds = 2;                  // with a camera: refinements against the camera-facing
+                                           // model samples only (re-selected each round), >= 0
+  double visible_distance = 0.01;          // a visible model point farther than this from every
+                                           // observed point counts as unexplained [m], > 0
+  double unexplained_weight = 0.02;        // score = fit_error + weight * unexplained fraction
+                                           // [m per unit fraction], >= 0
+  void Validate() const;                   // throws std::invalid_argument naming the field
+};
+
+/// Outcome class of a fit (an expected failure is a result, not an exception).
+enum class FitStatus {
+  kOk,            // a pose was found
+  kTooFewPoints,  // the observed cloud has fewer than kMinFitPoints points
+};
+
+/// Smallest observed cloud a fit is attempted on.
+inline constexpr int kMinFitPoints = 10;
+
+/// One initial guess tried by the fit and where ICP took it.
+struct FitCandidate {
+  std::string label;  // "main_<a>": principal axes aligned, then turned by <a> = 0/90/180/270
+                      // deg about the main axis; "rev_<a>": the same after 180 deg about the
+                      // second axis (main axis reversed). main_180 and rev_0/rev_180 are the
+                      // 180-degree flips about each principal axis.
+  Eigen::Isometry3d X_RT_initial = Eigen::Isometry3d::Identity();  // guess, tool in root R
+  Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();          // after the coarse ICP
+  double fit_error = 0.0;     // mean observed-to-model distance after the coarse ICP [m]
+  double unexplained = 0.0;   // fraction of camera-facing model points with no observed point
+                              // within visible_distance, in [0, 1]; 0 without a camera
+  double score = 0.0;         // fit_error + unexplained_weight * unexplained [m]; lower = better
+  bool converged = false;     // PCL's hasConverged() of the coarse ICP
+};
+
+/// Pose of a library model fitted to an observed (partial) cloud.
+struct ModelFitResult {
+  FitStatus status = FitStatus::kTooFewPoints;
+  std::string reason;      // empty when kOk
+  std::string model;       // library model name
+  Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();  // tool frame T in the root R
+  double fit_error = 0.0;  // mean distance observed point -> nearest model point [m]
+  double unexplained = 0.0;  // see FitCandidate::unexplained, for the final pose
+  double score = 0.0;      // see FitCandidate::score, for the final pose [m]
+  bool converged = false;  // PCL's hasConverged() of the final ICP
+  int iterations = 0;      // ICP iteration cap used by the final fit
+  std::vector<FitCandidate> candidates;  // every initial guess, in the order tried
+  int best_candidate = -1;               // index into `candidates` the final fit started from
+};
+
+/// Fits one library model to observed clouds. Construction samples the model
+/// (ModelFitOptions::model_points, area-weighted) and builds its search structure once; Fit
+/// can then be called for many clouds.
+///
+/// Fit direction: source = observed cloud, target = model (measured.md: fitting the full model
+/// into a partial view biases the pose by ~9 mm / 3.5 deg). Initialisation: the principal axes
+/// of the observed cloud are aligned to the model's (main axis to main axis, centroids
+/// together), then the 180-degree flips about each model axis and the 90/270-degree turns about
+/// the main axis (the Table 5.3 rot1-rot3 cases) are tried with a short ICP; the best score
+/// wins and is refined by the full ICP.
+class ModelFitter {
+ public:
+  /// Throws std::invalid_argument for bad options (Validate) or a model whose mesh cannot be
+  /// sampled (see SampleSurface).
+  ModelFitter(const toollib::ToolModel& model, const ModelFitOptions& options);
+  ~ModelFitter();
+  ModelFitter(ModelFitter&&) noexcept;
+  ModelFitter& operator=(ModelFitter&&) noexcept;
+
+  /// Fits the model to `p_R` (3 x N observed points in the root frame R [m]).
+  /// `p_R_camera`, when given, is the camera centre in R; it lets the score count the
+  /// camera-facing model surface the observation does not explain (a partial cloud otherwise
+  /// fits inside any larger model). Returns kTooFewPoints with a reason for fewer than
+  /// kMinFitPoints points. Throws std::invalid_argument when `p_R` has a non-finite entry.
+  ModelFitResult Fit(const Eigen::Matrix3Xf& p_R,
+                     const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
+
+  /// The model samples in T (for display and tests).
+  const SurfaceSamples& samples() const;
+  /// The library model name.
+  const std::string& name() const;
+  /// Extents of the model samples along their principal axes, largest first [m].
+  const Eigen::Vector3d& principal_extents() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Options of RecognizeTool.
+struct RecognitionOptions {
+  ModelFitOptions fit;        // used for every model
+  int max_models = 6;         // models fitted after the cheap pre-selection, > 0
+  int ranking_iterations = 60;  // ICP cap (per round) of the fits that rank those models; the
+                                // winner is refitted with fit.max_iterations, > 0
+  double confidence_scale = 0.002;  // softmax temperature on the scores [m], > 0
+  void Validate() const;      // throws std::invalid_argument naming the field
+};
+
+/// One model's result inside RecognizeTool.
+struct ModelScore {
+  std::string model;           // library model name
+  double extent_distance = 0;  // cheap pre-selection distance (relative extent mismatch)
+  bool fitted = false;         // false when the pre-selection dropped it
+  double score = 0;            // ModelFitResult::score of the ranking fit when fitted [m]
+};
+
+/// Best library model for one observed cloud.
+struct RecognitionResult {
+  FitStatus status = FitStatus::kTooFewPoints;
+  std::string reason;        // empty when kOk
+  std::string model;         // best model's name
+  double confidence = 0.0;   // softmax of -score / confidence_scale over the fitted models, (0, 1]
+  ModelFitResult fit;        // the best model's full fit
+  std::vector<ModelScore> scores;  // every library model, in library order
+};
+
+/// Recognises a tool by fitting library models (a baseline; a learned classifier comes later).
+/// Colour-free: the models are pre-selected by how well the principal extents of the observed
+/// cloud match theirs (observed length may be shorter than the model's when occluded, never
+/// much longer), the `max_models` best are fitted with a short ICP (ranking_iterations) and
+/// the lowest score wins; the winner is then refitted with the full options. Construction
+/// samples every model once.
+class ToolRecognizer {
+ public:
+  /// Throws std::invalid_argument for bad options, an empty library, or a model that cannot be
+  /// sampled.
+  ToolRecognizer(const std::vector<toollib::ToolModel>& library, const RecognitionOptions& options);
+  ~ToolRecognizer();
+  ToolRecognizer(ToolRecognizer&&) noexcept;
+  ToolRecognizer& operator=(ToolRecognizer&&) noexcept;
+
+  /// See the class comment; arguments as ModelFitter::Fit. Returns kTooFewPoints with a reason
+  /// for a cloud too small to fit; throws std::invalid_argument for non-finite points.
+  RecognitionResult Recognize(const Eigen::Matrix3Xf& p_R,
+                              const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
+
+  /// The fitter of library model `index` (library order).
+  const ModelFitter& fitter(int index) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Extents of a cloud along its principal axes, largest first [m] (the cheap feature
+/// RecognizeTool pre-selects with). Zero for fewer than 2 points.
+Eigen::Vector3d PrincipalExtents(const Eigen::Matrix3Xf& points);
+
+}  // namespace toolbench::perception
