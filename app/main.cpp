@@ -12,6 +12,8 @@
 #include <spdlog/spdlog.h>
 
 #include "app/bench.h"
+#include "app/capture.h"
+#include "app/perceive.h"
 #include "app/frame_io.h"
 #include "app/scene_setup.h"
 #include "common/check.h"
@@ -61,80 +63,18 @@ void AddSceneOptions(CLI::App* cmd, app::SceneRequest& request) {
       ->check(CLI::ExistingDirectory);
 }
 
-nlohmann::json ToolsJson(const app::LoadedScene& scene, const sim::GroundTruth& truth) {
-  nlohmann::json tools = nlohmann::json::array();
-  for (const auto& placed : scene.composed.tools) {
-    const Eigen::Isometry3d X_RT = scene.composed.X_WR.inverse() * truth.Pose(placed.body);
-    tools.push_back({{"name", placed.name}, {"cell", placed.cell}, {"X_RT", app::PoseJson(X_RT)}});
-  }
-  return tools;
-}
-
-int RunRender(const app::SceneRequest& request, const std::filesystem::path& out_dir, bool noise,
-              bool look_at_table, const std::string& camera) {
+int RunRender(const app::SceneRequest& request, const std::filesystem::path& out_dir,
+              const app::CaptureOptions& options) {
   const auto t_start = std::chrono::steady_clock::now();
-  app::LoadedScene scene = app::LoadScene(request);
-  sim::World world(scene.composed.mjcf, "scene seed " + std::to_string(request.seed));
-  sim::SimRobot robot(world);
-
-  // Let the tools come to rest on the rack, then turn torso and head (thesis Fig. 5.4).
-  const bool at_rest = world.SettleFreeBodies(scene.spec.physics.settle_time);
-  if (!at_rest) spdlog::warn("render: tools still moving after {} s of settling", scene.spec.physics.settle_time);
-  sim::SimStatus status = world.status();
-  const sim::GroundTruth settled = world.ground_truth();
-  const Eigen::Vector3d target =
-      look_at_table ? Eigen::Vector3d(scene.spec.table.center.x(), scene.spec.table.center.y(),
-                                      scene.spec.table.top_z)
-                    : app::RackViewTarget(scene.spec);
-  const app::LookResult look = app::LookAt(robot, scene.robot, target);
-  status = world.status();
-  if (!status.ok) throw std::runtime_error("simulation became unstable: " + status.message);
-
   sim::GlContext gl;
-  sim::RendererOptions options;
-  options.noise.enabled = noise;
-  options.camera = camera;
-  sim::Renderer renderer(gl, world, options);
-  RgbdFrame frame = renderer.Render(world, DeriveSeed(request.seed, "sensor_noise"));
-  // The helmet camera's pose comes from encoder forward kinematics, as on the robot; the
-  // overview camera is fixed in the world with calibrated extrinsics.
-  frame.X_RC = camera == "helmet" ? app::CameraPoseFromEncoders(scene.robot, robot) : scene.composed.X_RO;
-
-  nlohmann::json extra;
-  extra["seed"] = request.seed;
-  extra["camera"] = camera;
-  extra["noise"] = noise;
-  extra["joints"] = nlohmann::json::object();
-  const auto names = robot.JointNames();
-  const Eigen::VectorXd q = robot.ReadEncoders();
-  for (size_t i = 0; i < names.size(); ++i) extra["joints"][names[i]] = q[static_cast<Eigen::Index>(i)];
-  extra["gaze"] = {{"target_R", {target.x(), target.y(), target.z()}},
-                   {"converged", look.gaze.converged},
-                   {"error_deg", look.gaze.error_deg},
-                   {"motion_reached", look.motion.reached}};
-  app::WriteFrame(out_dir, frame, extra);
-
-  // Ground truth goes to its own file, for scoring only.
-  const sim::GroundTruth truth = world.ground_truth();
-  nlohmann::json gt;
-  gt["note"] = "simulator ground truth: for scoring and debugging, never an input to perception";
-  gt["X_WR"] = app::PoseJson(scene.composed.X_WR);
-  gt["tools"] = ToolsJson(scene, truth);
-  gt["ball_R"] = app::PoseJson(scene.composed.X_WR.inverse() * truth.Pose("ball"))["position"];
-  double drift = 0.0;
-  for (const auto& placed : scene.composed.tools) {
-    drift = std::max(drift, (truth.Pose(placed.body).translation() -
-                             settled.Pose(placed.body).translation()).norm());
-  }
-  gt["tool_drift_since_settled_m"] = drift;
-  gt["settled"] = at_rest;
-  WriteTextFile(out_dir / "ground_truth.json", gt.dump(2) + "\n");
-  WriteTextFile(out_dir / "scene.xml", scene.composed.mjcf);
-
+  const app::Capture capture = app::CaptureFrame(request, options, gl);
+  app::WriteFrame(out_dir, capture.frame, app::CaptureMetadata(capture, request, options));
+  WriteTextFile(out_dir / "ground_truth.json", app::GroundTruthJson(capture).dump(2) + "\n");
+  WriteTextFile(out_dir / "scene.xml", capture.scene.composed.mjcf);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   spdlog::info("render: seed {}, {} tool(s), frame written to {} ({:.2f} s)", request.seed,
-               scene.composed.tools.size(), out_dir.string(), seconds);
+               capture.scene.composed.tools.size(), out_dir.string(), seconds);
   std::cout << out_dir.string() << "\n";
   return 0;
 }
@@ -198,6 +138,17 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"helmet", "overview"}))
       ->capture_default_str();
 
+  app::SceneRequest perceive_request;
+  std::filesystem::path perceive_out;
+  bool perceive_no_noise = false;
+  CLI::App* perceive = cli.add_subcommand(
+      "perceive", "Capture a frame of the rack (as render) and run perception on it: segments, "
+                  "object clouds, recognised models, fitted poses and handles (analysis.json, "
+                  "segments.png, tool_<i>.ply) and their score against ground truth (score.json)");
+  AddSceneOptions(perceive, perceive_request);
+  perceive->add_option("--out", perceive_out, "Output folder (default: runs/perceive-seed<N>)");
+  perceive->add_flag("--no-noise", perceive_no_noise, "Ideal images: switch the sensor noise model off");
+
   app::SceneRequest scene_request;
   std::filesystem::path scene_save;
   CLI::App* scene = cli.add_subcommand(
@@ -247,9 +198,19 @@ int main(int argc, char** argv) {
   try {
     if (render->parsed()) {
       if (render_out.empty()) render_out = "runs/render-seed" + std::to_string(render_request.seed);
-      return RunRender(render_request, render_out, !no_noise, look == "table", camera);
+      app::CaptureOptions options;
+      options.noise = !no_noise;
+      options.look_at_table = look == "table";
+      options.camera = camera;
+      return RunRender(render_request, render_out, options);
     }
     if (scene->parsed()) return RunScene(scene_request, scene_save);
+    if (perceive->parsed()) {
+      if (perceive_out.empty()) perceive_out = "runs/perceive-seed" + std::to_string(perceive_request.seed);
+      app::CaptureOptions options;
+      options.noise = !perceive_no_noise;
+      return app::RunPerceive(perceive_request, perceive_out, options);
+    }
     if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
     if (bench->parsed()) {
       const auto slash = shard.find('/');

@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "app/capture.h"
 #include "app/frame_io.h"
 #include "app/scene_setup.h"
 #include "sim/renderer.h"
@@ -19,29 +20,14 @@ std::unique_ptr<sim::GlContext> MakeContext() {
   }
 }
 
-struct Rendered {
-  LoadedScene scene;
-  RgbdFrame frame;
-  sim::GroundTruth truth;
-};
-
-Rendered RenderScene(sim::GlContext& gl, const SceneRequest& request, const Eigen::Vector3d& target,
-                     bool noise) {
-  Rendered out;
-  out.scene = LoadScene(request);
-  sim::World world(out.scene.composed.mjcf, "test");
-  sim::SimRobot robot(world);
-  world.SettleFreeBodies(out.scene.spec.physics.settle_time);
-  const LookResult look = LookAt(robot, out.scene.robot, target);
-  EXPECT_TRUE(look.gaze.converged);
-  EXPECT_TRUE(look.motion.reached) << look.motion.worst_joint << " " << look.motion.max_error;
-  sim::RendererOptions options;
-  options.noise.enabled = noise;
-  sim::Renderer renderer(gl, world, options);
-  out.frame = renderer.Render(world, 1);
-  out.frame.X_RC = CameraPoseFromEncoders(out.scene.robot, robot);
-  out.truth = world.ground_truth();
-  return out;
+Capture Render(sim::GlContext& gl, const SceneRequest& request, bool look_at_table, bool noise) {
+  CaptureOptions options;
+  options.look_at_table = look_at_table;
+  options.noise = noise;
+  Capture capture = CaptureFrame(request, options, gl);
+  EXPECT_TRUE(capture.look.gaze.converged);
+  EXPECT_TRUE(capture.look.motion.reached) << capture.look.motion.worst_joint << " " << capture.look.motion.max_error;
+  return capture;
 }
 
 TEST(RenderPipelineTest, TablePlaneFromEncoderPoseWithinOneMillimetre) {
@@ -49,13 +35,12 @@ TEST(RenderPipelineTest, TablePlaneFromEncoderPoseWithinOneMillimetre) {
   if (!gl) GTEST_SKIP() << "no OSMesa context available";
   SceneRequest request;
   request.seed = 2;
-  LoadedScene probe = LoadScene(request);
-  const sim::TableSpec& table = probe.spec.table;
-  const Rendered r = RenderScene(*gl, request, Eigen::Vector3d(table.center.x(), table.center.y(), table.top_z), false);
+  const Capture r = Render(*gl, request, true, false);
+  const sim::TableSpec& table = r.scene.spec.table;
   Eigen::Matrix3Xf p_R;
   Eigen::Matrix<unsigned char, 3, Eigen::Dynamic> colour;
   BackProject(r.frame, p_R, colour);
-  const Eigen::Vector3d ball = r.scene.composed.X_WR.inverse() * r.truth.Pose("ball").translation();
+  const Eigen::Vector3d ball = r.scene.composed.X_WR.inverse() * r.world->ground_truth().Pose("ball").translation();
   std::vector<double> errors;
   for (Eigen::Index i = 0; i < p_R.cols(); ++i) {
     const Eigen::Vector3d p = p_R.col(i).cast<double>();
@@ -75,13 +60,12 @@ TEST(RenderPipelineTest, RackViewShowsEveryTool) {
   if (!gl) GTEST_SKIP() << "no OSMesa context available";
   SceneRequest request;
   request.seed = 1;
-  LoadedScene probe = LoadScene(request);
-  const Rendered r = RenderScene(*gl, request, RackViewTarget(probe.spec), true);
+  const Capture r = Render(*gl, request, false, true);
   // Every tool's origin (handle butt) and its effector centre project inside the image, in
   // front of the camera, and the depth there is the tool's (not the board behind it).
   const CameraIntrinsics& K = r.frame.intrinsics;
   for (const auto& placed : r.scene.composed.tools) {
-    const Eigen::Isometry3d X_RT = r.scene.composed.X_WR.inverse() * r.truth.Pose(placed.body);
+    const Eigen::Isometry3d X_RT = r.scene.composed.X_WR.inverse() * r.world->ground_truth().Pose(placed.body);
     const auto& model = *std::find_if(r.scene.library.begin(), r.scene.library.end(),
                                       [&](const auto& t) { return t.name == placed.name; });
     for (const Eigen::Vector3d& p_T : {model.handle.center, model.effector.center}) {

@@ -1,0 +1,23 @@
+#pragma once
+
+#include <filesystem>
+
+#include "app/capture.h"
+#include "app/scene_setup.h"
+
+namespace toolbench::app {
+
+/// `toolbench perceive`: captures a frame of the rack (as `render`), runs perception on it
+/// (segmentation, object clouds, recognition and model fit) and writes, besides the frame files:
+///   analysis.json  one entry per segmented tool: segment, cloud counts or the reason it failed,
+///                  recognised model and confidence, X_RT, handle centre and axis in R, and the
+///                  per-stage times [ms]
+///   segments.png   the image with each segment's contour, box and label
+///   tool_<i>.ply   the object cloud (grey) with the fitted model's samples (colour), in R
+///   score.json     evaluation against ground truth (never read by perception)
+/// Returns 0 when perception ran (even if some tools were not recognised: they are recorded
+/// with their reason). Throws std::invalid_argument for bad requests.
+int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir,
+                const CaptureOptions& options);
+
+}  // namespace toolbench::app
