@@ -430,7 +430,7 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
   w.Line(1, "</asset>");
 
   w.Line(1, "<worldbody>");
-  w.Line(2, "<light name=\"sun\" directional=\"true\" castshadow=\"false\" pos=\"0 0 3\" dir=\"0.3 0.2 -1\" diffuse=\"0.5 0.5 0.5\"/>");
+  w.Line(2, "<light name=\"sun\" directional=\"true\" castshadow=\"true\" pos=\"0 0 3\" dir=\"0.3 0.2 -1\" diffuse=\"0.5 0.5 0.5\"/>");
   w.Line(2, "<geom name=\"floor\" class=\"world\" type=\"plane\" size=\"3 3 0.1\" material=\"floor\"/>");
 
   // A third-person camera in front of the robot, to its right, looking at robot, table and rack.
