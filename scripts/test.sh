@@ -36,7 +36,7 @@ cmake --build build-fuzz -j "$jobs" --target mesh_loader_fuzz scene_parser_fuzz
 for target in mesh_loader_fuzz:fuzz/corpus/mesh scene_parser_fuzz:fuzz/corpus/scene; do
   name="${target%%:*}"; seeds="${target#*:}"
   work="build-fuzz/corpus-$name"; mkdir -p "$work"
-  build-fuzz/"$name" -max_total_time="$fuzz_seconds" -rss_limit_mb=2048 -print_final_stats=1 \
+  TMPDIR=/dev/shm build-fuzz/fuzz/"$name" -max_total_time="$fuzz_seconds" -rss_limit_mb=2048 -print_final_stats=1 \
     "$work" "$seeds" 2>&1 | tail -n 12
 done
 echo "all test stages passed"
