@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "app/bench_grasp.h"
 #include "app/bench_ik.h"
 #include "common/check.h"
 #include "common/paths.h"
@@ -15,6 +16,10 @@ std::vector<BenchProtocol> BenchProtocols() {
   std::vector<BenchProtocol> protocols;
   protocols.push_back({"ik", "Cartesian solver: 500 reachable + 100 unreachable palm poses, default vs plain Ipopt",
                        RunIkBench});
+  protocols.push_back({"grasp-gt",
+                       "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
+                       "ground-truth handle pose",
+                       RunGraspBench});
   return protocols;
 }
 

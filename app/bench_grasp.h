@@ -1,0 +1,62 @@
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "app/bench.h"
+#include "app/scene_setup.h"
+#include "control/skills.h"
+
+namespace toolbench::app {
+
+/// How one ground-truth grasp case is judged (issue 4): after GraspHandle lifted the tool, the
+/// hand holds it for `hold_time`; success = the tool rose at least `min_lift_m` above its rest
+/// height, the handle centre moved less than `max_slip_m` in the palm frame during the hold, and
+/// the tool touched only robot bodies ("r_" prefix) during the hold.
+struct GraspCaseOptions {
+  double hold_time = 2.0;       // judged hold [s], > 0
+  double min_lift_m = 0.05;     // [m], > 0
+  double max_slip_m = 0.005;    // [m], > 0
+  double sample_period = 0.05;  // contact / slip sampling period during the hold [s], > 0
+  /// Let the grasp centre slide along the handle: sets grasp.handle_slide_m to (handle length -
+  /// grasp length) / 2 - slide_margin_m of the tool's model (the ground-truth handle segment).
+  bool slide_along_handle = true;
+  double slide_margin_m = 0.01;  // [m], >= 0
+  control::GraspOptions grasp;   // the skill's options
+  void Validate() const;         // throws std::invalid_argument naming the field and its value
+};
+
+/// Outcome of one case (tool in cell, new World).
+struct GraspCaseResult {
+  std::string tool;
+  std::string cell;
+  bool success = false;
+  std::string reason;                         // empty on success: the skill's status/reason, or the failed criterion
+  control::GraspResult grasp;                 // what the skill reported
+  double lift_m = 0.0;                        // tool origin height above its settled rest height after the lift [m]
+  double palm_rise_m = 0.0;           // palm height at the end above the planned grasp pose (ground truth) [m]
+  double slip_m = 0.0;                        // largest displacement of the handle centre in P during the hold [m]
+  double slip_rad = 0.0;                      // largest rotation of the tool relative to P during the hold [rad]
+  std::vector<std::string> foreign_contacts;  // non-robot bodies the tool touched during the hold
+  std::vector<std::string> robot_contacts;    // "robot body-other body" touching when the skill ended
+  bool settled = false;                       // the tool came to rest on the rack before the grasp
+  double sim_time = 0.0;                      // simulated time of the whole case, settling included [s]
+  double wall_ms = 0.0;                       // [ms], informational
+};
+
+/// Runs one case: composes `scene` with only `tool` in `cell`, settles it, grasps the handle
+/// from its ground-truth pose (X_RT times the handle segment: this isolates control from
+/// perception), lifts, holds and scores. Never throws for a failed grasp (it is a result).
+/// Throws std::invalid_argument for an unknown tool or cell, or bad options.
+GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, const std::string& cell,
+                             std::uint64_t seed, const GraspCaseOptions& options = {});
+
+/// Protocol "grasp-gt": every library tool in each of the 7 cells (pos1 pos2 pos3 rot0 rot1
+/// rot2 rot3), case index = tool index * 7 + cell index, grasped from the ground-truth handle
+/// pose with RunGraspCase. Writes cases.jsonl (tool, cell, success, reason, lift_m, slip_m,
+/// sim_time_s, wall_ms, ...) and summary.json (grasp_success_rate, per_tool, per_cell,
+/// failure_reasons). Honours shard and limit. Returns 0 when the run completed.
+int RunGraspBench(const BenchRequest& request);
+
+}  // namespace toolbench::app
