@@ -3,6 +3,11 @@
 if(TOOLBENCH_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
   add_link_options(-fsanitize=address,undefined)
+  # Under ASan, Eigen stops trusting glibc's 16-byte malloc alignment and switches to its own
+  # aligned allocator, while Debian's PCL (built without ASan) keeps plain malloc: a PCL cloud
+  # allocated in libpcl and freed in our code then reads a header that is not there. ASan's
+  # malloc is 16-byte aligned on x86_64 too, so keep Eigen's normal (ABI-compatible) setting.
+  add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
 endif()
 
 # toolbench_target_defaults(<target>): warnings and include root for a project target.
