@@ -131,18 +131,6 @@ SimStatus World::Advance(double seconds) {
   return Step(std::max(0, steps));
 }
 
-double World::MaxFreeBodySpeed() const {
-  const mjModel* m = impl_->m;
-  double fastest = 0.0;
-  for (int j = 0; j < m->njnt; ++j) {
-    if (m->jnt_type[j] != mjJNT_FREE) continue;
-    const mjtNum* v = impl_->d->qvel + m->jnt_dofadr[j];
-    fastest = std::max({fastest, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
-                        0.1 * std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5])});
-  }
-  return fastest;
-}
-
 bool World::SettleFreeBodies(double max_time, double speed_tol, double hold) {
   // Judged by displacement over a window, not instantaneous speed: contacts of small convex parts
   // vibrate at a few mm/s without the body going anywhere.

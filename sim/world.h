@@ -54,8 +54,6 @@ class World {
   /// `hold` seconds (rotations count at a 0.1 m lever), or `max_time` has passed. Returns true
   /// when everything came to rest; physics failures show in status().
   bool SettleFreeBodies(double max_time, double speed_tol = 1e-3, double hold = 0.25);
-  /// Largest linear speed of any free body [m/s].
-  double MaxFreeBodySpeed() const;
   double time() const;      // simulated time [s]
   double timestep() const;  // [s]
   SimStatus status() const;
