@@ -6,6 +6,7 @@
 
 #include "app/bench_grasp.h"
 #include "app/bench_ik.h"
+#include "app/bench_table53.h"
 #include "common/check.h"
 #include "common/paths.h"
 
@@ -20,6 +21,10 @@ std::vector<BenchProtocol> BenchProtocols() {
                        "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
                        "ground-truth handle pose",
                        RunGraspBench});
+  protocols.push_back({"table53",
+                       "Perception accuracy: every library tool in the 7 Table 5.3 cells, ours vs the thesis "
+                       "configuration on the same frames; writes table53.md",
+                       RunTable53Bench});
   return protocols;
 }
 

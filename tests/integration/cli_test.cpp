@@ -2,8 +2,10 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -98,6 +100,30 @@ TEST(CliTest, RenderWritesTheFrameFiles) {
   for (const char* file : {"rgb.png", "depth.png", "camera.json", "cloud.ply", "ground_truth.json", "scene.xml"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / file)) << file;
   }
+}
+
+TEST(CliTest, Table53BenchScoresCasesAndWritesTheReport) {
+  const auto dir = TempDir("table53");
+  // Two cases of the sweep (hammer_1 in pos1 and pos2), ours and the thesis configuration.
+  const CliRun r = Toolbench("bench --protocol table53 --limit 2 --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream in(dir / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  EXPECT_EQ(summary["cases"], 2);
+  EXPECT_EQ(summary["failed_cases"], 0);
+  for (const char* key : {"mean_score", "share_perfect", "share_zero", "recognition_accuracy",
+                          "handle_error_median_m", "handle_error_p90_m", "per_stage_ms_median"}) {
+    EXPECT_TRUE(summary.contains(key)) << key;
+    EXPECT_TRUE(summary["thesis_config"].contains(key)) << key;
+  }
+  EXPECT_GE(summary["mean_score"].get<double>(), 0.0);
+  EXPECT_LE(summary["mean_score"].get<double>(), 1.0);
+  // The handle is found within a few centimetres on these easy, upright cells.
+  EXPECT_LT(summary["handle_error_median_m"].get<double>(), 0.03);
+  std::ifstream table(dir / "table53.md");
+  const std::string md((std::istreambuf_iterator<char>(table)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(md, HasSubstr("| tool name | pos1 | pos2 | pos3 | rot0 | rot1 | rot2 | rot3 | overall |"));
+  EXPECT_THAT(md, HasSubstr("| hammer_1 |"));
 }
 
 }  // namespace
