@@ -15,23 +15,23 @@ namespace toolbench::app {
 std::vector<BenchProtocol> BenchProtocols() {
   // Protocols are listed here explicitly (no static registration: no global state).
   std::vector<BenchProtocol> protocols;
-  protocols.push_back({"ik", "Cartesian solver: 500 reachable + 100 unreachable palm poses, default vs plain Ipopt",
-                       RunIkBench});
+  protocols.push_back(
+      {"ik", "Cartesian solver: 500 reachable + 100 unreachable palm poses, default vs plain Ipopt", RunIkBench,
+       nullptr});
   protocols.push_back({"grasp-gt",
                        "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
                        "ground-truth handle pose",
-                       RunGraspBench});
+                       RunGraspBench, nullptr});
   protocols.push_back({"table53",
                        "Perception accuracy: every library tool in the 7 Table 5.3 cells, ours vs the thesis "
                        "configuration on the same frames; writes table53.md",
-                       RunTable53Bench});
+                       RunTable53Bench, ReportTable53});
   return protocols;
 }
 
 int RunBench(const BenchRequest& request) {
   if (request.shard_count < 1 || request.shard_index < 0 || request.shard_index >= request.shard_count) {
-    ThrowInvalid("bench: shard ", request.shard_index, "/", request.shard_count,
-                 " is not valid (expected 0 <= i < N)");
+    ThrowInvalid("bench: shard ", request.shard_index, "/", request.shard_count, " is not valid (expected 0 <= i < N)");
   }
   std::string known;
   for (const BenchProtocol& protocol : BenchProtocols()) {
@@ -39,6 +39,48 @@ int RunBench(const BenchRequest& request) {
     known += (known.empty() ? "" : ", ") + protocol.name;
   }
   ThrowInvalid("bench: unknown protocol '", request.protocol, "' (known: ", known.empty() ? "none yet" : known, ")");
+}
+
+SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& protocol, const nlohmann::json& info) {
+  SweepOptions options;
+  options.out_dir = request.out_dir;
+  options.protocol = protocol;
+  options.shard_index = request.shard_index;
+  options.shard_count = request.shard_count;
+  options.limit = request.limit;
+  options.jobs = request.jobs;
+  options.resume = request.resume;
+  options.isolate = request.isolate;
+  options.run_info = info;
+  options.run_info["seed"] = request.seed;
+  return options;
+}
+
+int MergeRuns(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& out_dir) {
+  if (dirs.empty()) ThrowInvalid("merge: no run folders given");
+  const std::vector<SweepLine> lines = ReadSweepResults(dirs);
+  if (lines.empty()) ThrowInvalid("merge: the run folders hold no results");
+  const std::string protocol = lines.front()["protocol"];
+  BenchRequest request;
+  request.protocol = protocol;
+  request.out_dir = out_dir;
+  // The master seed of the sweep, from the first folder's run.json (all shards share it).
+  const std::filesystem::path info_file = dirs.front() / "run.json";
+  if (std::filesystem::exists(info_file)) {
+    const nlohmann::json info = nlohmann::json::parse(ReadTextFile(info_file));
+    request.seed = info.value("seed", std::uint64_t{1});
+  }
+  for (const BenchProtocol& p : BenchProtocols()) {
+    if (p.name != protocol) continue;
+    if (!p.report) ThrowInvalid("merge: protocol '", protocol, "' does not record mergeable results");
+    std::filesystem::create_directories(out_dir);
+    std::string all;
+    for (const SweepLine& line : lines) all += line.dump() + "\n";
+    WriteTextFile(out_dir / "results.jsonl", all);
+    p.report(request, lines);
+    return 0;
+  }
+  ThrowInvalid("merge: results of unknown protocol '", protocol, "'");
 }
 
 void WriteJson(const std::filesystem::path& path, const nlohmann::json& value) {

@@ -15,6 +15,9 @@ namespace toolbench::app {
 /// `summary.json` (mean_score, share_perfect, share_zero, recognition_accuracy,
 /// handle_error_median_m, handle_error_p90_m, per_stage_ms_median, the same for
 /// the baseline, and the speed-up).
-int RunTable53Bench(const BenchRequest &request);
+int RunTable53Bench(const BenchRequest& request);
 
-} // namespace toolbench::app
+/// Writes summary.json and table53.md from table53 results lines (this run's or merged shards').
+void ReportTable53(const BenchRequest& request, const std::vector<SweepLine>& lines);
+
+}  // namespace toolbench::app

@@ -186,7 +186,21 @@ int main(int argc, char** argv) {
     bench->add_option("--limit", bench_request.limit, "Run at most this many cases (0 = all)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
+    bench->add_option("--jobs", bench_request.jobs, "Cases run at once, each in its own process")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    bench->add_flag("--resume", bench_request.resume, "Keep --out/results.jsonl and skip the cases it already holds");
+    bench->add_flag(
+        "--no-isolate", [&](std::int64_t) { bench_request.isolate = false; },
+        "Run cases in this process instead of child processes (for a debugger)");
   }
+
+  std::vector<std::filesystem::path> merge_dirs;
+  std::filesystem::path merge_out;
+  CLI::App* merge = cli.add_subcommand(
+      "merge", "Join the results.jsonl of several bench run folders (e.g. shards) and write the protocol's report");
+  merge->add_option("dirs", merge_dirs, "Run folders of one protocol")->required()->check(CLI::ExistingDirectory);
+  merge->add_option("--out", merge_out, "Output folder of the merged report")->required();
 
   try {
     cli.parse(argc, argv);
@@ -223,6 +237,7 @@ int main(int argc, char** argv) {
       }
       return app::RunBench(bench_request);
     }
+    if (merge->parsed()) return app::MergeRuns(merge_dirs, merge_out);
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;

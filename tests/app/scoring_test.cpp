@@ -19,8 +19,7 @@ toollib::ToolModel Hoe() {
 }
 
 /// An analysis that places `model` at X_RT with its sidecar handle.
-perception::ToolAnalysis Analysis(const toollib::ToolModel &model,
-                                  const Eigen::Isometry3d &X_RT) {
+perception::ToolAnalysis Analysis(const toollib::ToolModel& model, const Eigen::Isometry3d& X_RT) {
   perception::ToolAnalysis a;
   a.status = perception::AnalysisStatus::kOk;
   a.model = model.name;
@@ -30,11 +29,10 @@ perception::ToolAnalysis Analysis(const toollib::ToolModel &model,
   return a;
 }
 
-Eigen::Isometry3d Pose(double yaw, const Eigen::Vector3d &p) {
+Eigen::Isometry3d Pose(double yaw, const Eigen::Vector3d& p) {
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-  X.linear() =
-      Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
-      Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  X.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+               Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitX()).toRotationMatrix();
   X.translation() = p;
   return X;
 }
@@ -61,17 +59,14 @@ TEST(ScoreCellTest, SmallErrorsStayPerfectLargeOnesDoNot) {
   EXPECT_EQ(off.score, 0.0);
   EXPECT_EQ(off.verdict, "centre_off");
   // 30 degrees about the tool's x axis: the handle axis is wrong.
-  Eigen::Isometry3d tilted =
-      X * Eigen::AngleAxisd(0.52, Eigen::Vector3d::UnitX());
-  EXPECT_EQ(ScoreCell(Analysis(hoe, tilted), hoe, X, "hoe").verdict,
-            "axis_wrong");
+  Eigen::Isometry3d tilted = X * Eigen::AngleAxisd(0.52, Eigen::Vector3d::UnitX());
+  EXPECT_EQ(ScoreCell(Analysis(hoe, tilted), hoe, X, "hoe").verdict, "axis_wrong");
 }
 
 TEST(ScoreCellTest, EffectorOnTheOtherSideScoresHalf) {
   const auto hoe = Hoe();
   const Eigen::Isometry3d X = Pose(0.3, {-0.2, 0.5, 0.1});
-  const Eigen::Isometry3d turned =
-      X * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ());
+  const Eigen::Isometry3d turned = X * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ());
   const CellScore s = ScoreCell(Analysis(hoe, turned), hoe, X, "hoe");
   EXPECT_EQ(s.score, 0.5);
   EXPECT_EQ(s.verdict, "effector_wrong_side");
@@ -82,8 +77,7 @@ TEST(ScoreCellTest, EndToEndFlipScoresHalfUnlessTheShapeIsSymmetric) {
   auto hoe = Hoe();
   const Eigen::Isometry3d X = Pose(0.3, {-0.2, 0.5, 0.1});
   Eigen::Isometry3d X_TT = Eigen::Isometry3d::Identity();
-  X_TT.linear() =
-      Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  X_TT.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   X_TT.translation() = Eigen::Vector3d(0, 0, hoe.total_length);
   const Eigen::Isometry3d flipped = X * X_TT;
   const CellScore s = ScoreCell(Analysis(hoe, flipped), hoe, X, "hoe");
@@ -107,10 +101,10 @@ TEST(ScoreCellTest, FailedAnalysisScoresZeroAndWrongModelIsNotRecognised) {
   auto a = Analysis(hoe, X);
   a.model = "rake_1";
   const CellScore s = ScoreCell(a, hoe, X, "rake");
-  EXPECT_EQ(s.score, 1.0); // the pose is scored, as in the thesis
+  EXPECT_EQ(s.score, 1.0);  // the pose is scored, as in the thesis
   EXPECT_FALSE(s.recognised);
   EXPECT_FALSE(s.family_recognised);
 }
 
-} // namespace
-} // namespace toolbench::app
+}  // namespace
+}  // namespace toolbench::app

@@ -124,6 +124,15 @@ TEST(CliTest, Table53BenchScoresCasesAndWritesTheReport) {
   const std::string md((std::istreambuf_iterator<char>(table)), std::istreambuf_iterator<char>());
   EXPECT_THAT(md, HasSubstr("| tool name | pos1 | pos2 | pos3 | rot0 | rot1 | rot2 | rot3 | overall |"));
   EXPECT_THAT(md, HasSubstr("| hammer_1 |"));
+  // One results line per case, and merging the folder reproduces the report.
+  std::ifstream results(dir / "results.jsonl");
+  int lines = 0;
+  for (std::string line; std::getline(results, line);) ++lines;
+  EXPECT_EQ(lines, 2);
+  const auto merged = TempDir("table53_merged");
+  const CliRun m = Toolbench("merge " + dir.string() + " --out " + merged.string());
+  ASSERT_EQ(m.code, 0) << m.output;
+  EXPECT_TRUE(std::filesystem::exists(merged / "table53.md"));
 }
 
 }  // namespace

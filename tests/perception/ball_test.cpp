@@ -1,9 +1,9 @@
 #include "perception/ball.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <limits>
-
-#include <gtest/gtest.h>
 
 #include "common/rng.h"
 
@@ -12,9 +12,8 @@ namespace {
 
 /// A 320x240 frame looking at a ball of radius r centred at c_C (camera frame)
 /// in front of a grey wall at 1.2 m, with Gaussian depth noise of sigma [m].
-RgbdFrame SphereFrame(const Eigen::Vector3d &c_C, double r, double sigma,
-                      std::uint64_t seed,
-                      const cv::Vec3b &colour = {230, 25, 25}) {
+RgbdFrame SphereFrame(const Eigen::Vector3d& c_C, double r, double sigma, std::uint64_t seed,
+                      const cv::Vec3b& colour = {230, 25, 25}) {
   RgbdFrame frame;
   frame.intrinsics = {320, 240, 260.0, 260.0, 159.5, 119.5};
   frame.rgb = cv::Mat(240, 320, CV_8UC3, cv::Scalar(120, 120, 120));
@@ -22,17 +21,13 @@ RgbdFrame SphereFrame(const Eigen::Vector3d &c_C, double r, double sigma,
   Rng rng(seed);
   for (int v = 0; v < 240; ++v) {
     for (int u = 0; u < 320; ++u) {
-      const Eigen::Vector3d ray =
-          Eigen::Vector3d((u - 159.5) / 260.0, (v - 119.5) / 260.0, 1.0);
+      const Eigen::Vector3d ray = Eigen::Vector3d((u - 159.5) / 260.0, (v - 119.5) / 260.0, 1.0);
       // |t ray - c|^2 = r^2, nearest root; depth is t (z of the ray is 1).
-      const double a = ray.squaredNorm(), b = -2 * ray.dot(c_C),
-                   cc = c_C.squaredNorm() - r * r;
+      const double a = ray.squaredNorm(), b = -2 * ray.dot(c_C), cc = c_C.squaredNorm() - r * r;
       const double disc = b * b - 4 * a * cc;
-      if (disc < 0)
-        continue;
+      if (disc < 0) continue;
       const double t = (-b - std::sqrt(disc)) / (2 * a);
-      frame.depth.at<float>(v, u) =
-          static_cast<float>(t + sigma * StandardNormal(rng));
+      frame.depth.at<float>(v, u) = static_cast<float>(t + sigma * StandardNormal(rng));
       frame.rgb.at<cv::Vec3b>(v, u) = colour;
     }
   }
@@ -45,8 +40,7 @@ TEST(BallTest, FitSphereRecoversACapExactly) {
   Rng rng(3);
   for (int i = 0; i < 200; ++i) {
     // Points on the half facing -z only (what a camera sees).
-    Eigen::Vector3d d(StandardNormal(rng), StandardNormal(rng),
-                      -std::fabs(StandardNormal(rng)));
+    Eigen::Vector3d d(StandardNormal(rng), StandardNormal(rng), -std::fabs(StandardNormal(rng)));
     p.col(i) = c + 0.035 * d.normalized();
   }
   Eigen::Vector3d center;
@@ -69,8 +63,7 @@ TEST(BallTest, FitSphereRejectsDegeneratePoints) {
 TEST(BallTest, DetectsTheBallInANoisyFrameAndMovesItToTheRootFrame) {
   const Eigen::Vector3d c_C(0.05, 0.02, 0.7);
   RgbdFrame frame = SphereFrame(c_C, 0.035, 0.001, 7);
-  frame.X_RC = Eigen::Translation3d(0.1, 0.2, 0.3) *
-               Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitY());
+  frame.X_RC = Eigen::Translation3d(0.1, 0.2, 0.3) * Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitY());
   const BallDetection ball = DetectBall(frame, {});
   ASSERT_EQ(ball.status, BallStatus::kFound) << ball.reason;
   EXPECT_LT((ball.p_RB - frame.X_RC * c_C).norm(), 0.003);
@@ -79,12 +72,10 @@ TEST(BallTest, DetectsTheBallInANoisyFrameAndMovesItToTheRootFrame) {
 }
 
 TEST(BallTest, WrongColourOrWrongSizeIsReportedWithAReason) {
-  const BallDetection green =
-      DetectBall(SphereFrame({0, 0, 0.7}, 0.035, 0.0, 1, {25, 230, 25}), {});
+  const BallDetection green = DetectBall(SphereFrame({0, 0, 0.7}, 0.035, 0.0, 1, {25, 230, 25}), {});
   EXPECT_EQ(green.status, BallStatus::kNotSeen);
   EXPECT_FALSE(green.reason.empty());
-  const BallDetection big =
-      DetectBall(SphereFrame({0, 0, 0.9}, 0.10, 0.0, 1), {});
+  const BallDetection big = DetectBall(SphereFrame({0, 0, 0.9}, 0.10, 0.0, 1), {});
   EXPECT_EQ(big.status, BallStatus::kNoSphere);
   EXPECT_NE(big.reason.find("radius"), std::string::npos) << big.reason;
 }
@@ -101,5 +92,5 @@ TEST(BallTest, NaNDepthAndBadFramesDoNotCrash) {
   EXPECT_THROW(DetectBall(frame, bad), std::invalid_argument);
 }
 
-} // namespace
-} // namespace toolbench::perception
+}  // namespace
+}  // namespace toolbench::perception
