@@ -11,35 +11,29 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double Ms(Clock::time_point since) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - since)
-      .count();
-}
+double Ms(Clock::time_point since) { return std::chrono::duration<double, std::milli>(Clock::now() - since).count(); }
 
 /// Unit vector perpendicular to `axis`, as close to `preferred` as possible.
-Eigen::Vector3d PerpendicularTowards(const Eigen::Vector3d &axis,
-                                     const Eigen::Vector3d &preferred) {
+Eigen::Vector3d PerpendicularTowards(const Eigen::Vector3d& axis, const Eigen::Vector3d& preferred) {
   Eigen::Vector3d x = preferred - preferred.dot(axis) * axis;
-  if (x.norm() < 1e-9)
-    x = axis.unitOrthogonal();
+  if (x.norm() < 1e-9) x = axis.unitOrthogonal();
   return x.normalized();
 }
 
-} // namespace
+}  // namespace
 
 void AnalyzerOptions::Validate() const {
   segmentation.Validate();
   cloud.Validate();
   recognition.Validate();
   if (!(min_known_confidence >= 0.0 && min_known_confidence <= 1.0)) {
-    ThrowInvalid("AnalyzerOptions: min_known_confidence = ",
-                 min_known_confidence, " (expected in [0, 1])");
+    ThrowInvalid("AnalyzerOptions: min_known_confidence = ", min_known_confidence, " (expected in [0, 1])");
   }
 }
 
 AnalyzerOptions AnalyzerOptions::Thesis() {
   AnalyzerOptions options;
-  ModelFitOptions &fit = options.recognition.fit;
+  ModelFitOptions& fit = options.recognition.fit;
   fit.metric = IcpMetric::kPointToPoint;
   fit.model_points = 4000;
   fit.max_iterations = 500;
@@ -50,7 +44,7 @@ AnalyzerOptions AnalyzerOptions::Thesis() {
   return options;
 }
 
-Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel &model) {
+Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel& model) {
   const Eigen::Vector3d z = model.handle.axis.normalized();
   const Eigen::Vector3d x = PerpendicularTowards(z, Eigen::Vector3d::UnitX());
   Eigen::Isometry3d X_TH = Eigen::Isometry3d::Identity();
@@ -61,16 +55,16 @@ Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel &model) {
   return X_TH;
 }
 
-const char *ToString(AnalysisStatus status) {
+const char* ToString(AnalysisStatus status) {
   switch (status) {
-  case AnalysisStatus::kOk:
-    return "ok";
-  case AnalysisStatus::kNoCloud:
-    return "no_cloud";
-  case AnalysisStatus::kNoFit:
-    return "no_fit";
-  case AnalysisStatus::kNoHandle:
-    return "no_handle";
+    case AnalysisStatus::kOk:
+      return "ok";
+    case AnalysisStatus::kNoCloud:
+      return "no_cloud";
+    case AnalysisStatus::kNoFit:
+      return "no_fit";
+    case AnalysisStatus::kNoHandle:
+      return "no_handle";
   }
   return "unknown";
 }
@@ -81,17 +75,16 @@ struct ToolAnalyzer::Impl {
   std::unique_ptr<ToolRecognizer> recognizer;
   double preparation_ms = 0.0;
 
-  const toollib::ToolModel *Find(const std::string &name) const {
-    for (const auto &model : library) {
-      if (model.name == name)
-        return &model;
+  const toollib::ToolModel* Find(const std::string& name) const {
+    for (const auto& model : library) {
+      if (model.name == name) return &model;
     }
     return nullptr;
   }
 
   /// Handle and features of a recognised library model, placed with the fitted
   /// pose.
-  void PlaceHandle(const toollib::ToolModel &model, ToolAnalysis &out) const {
+  void PlaceHandle(const toollib::ToolModel& model, ToolAnalysis& out) const {
     const Eigen::Isometry3d X_TH = SidecarHandleFrame(model);
     out.handle.part = 0;
     out.handle.X_FH = out.X_RT * X_TH;
@@ -99,7 +92,7 @@ struct ToolAnalyzer::Impl {
     out.handle.axis = out.handle.X_FH.linear().col(2);
     out.handle.radius = model.handle.radius;
     out.handle.length = model.handle.length;
-    ToolFeatures &f = out.features;
+    ToolFeatures& f = out.features;
     f.total_length = model.total_length;
     f.handle_length = model.handle.length;
     f.handle_radius = model.handle.radius;
@@ -109,59 +102,47 @@ struct ToolAnalyzer::Impl {
     // own axis and its radius across it.
     for (int i = 0; i < 3; ++i) {
       const double along = std::abs(axis[i]);
-      f.effector_size[i] =
-          along * model.effector.length +
-          2.0 * model.effector.radius * std::sqrt(1.0 - along * along);
+      f.effector_size[i] = along * model.effector.length + 2.0 * model.effector.radius * std::sqrt(1.0 - along * along);
     }
-    f.effector_protrusion =
-        model.effector.center.x() + f.effector_size.x() / 2.0;
+    f.effector_protrusion = model.effector.center.x() + f.effector_size.x() / 2.0;
   }
 };
 
-ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library,
-                           const AnalyzerOptions &options)
+ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library, const AnalyzerOptions& options)
     : impl_(std::make_unique<Impl>()) {
   options.Validate();
-  if (library.empty())
-    ThrowInvalid("ToolAnalyzer: the tool library is empty");
+  if (library.empty()) ThrowInvalid("ToolAnalyzer: the tool library is empty");
   const auto start = Clock::now();
   impl_->library = std::move(library);
   impl_->options = options;
-  impl_->recognizer =
-      std::make_unique<ToolRecognizer>(impl_->library, options.recognition);
+  impl_->recognizer = std::make_unique<ToolRecognizer>(impl_->library, options.recognition);
   impl_->preparation_ms = Ms(start);
 }
 
 ToolAnalyzer::~ToolAnalyzer() = default;
-ToolAnalyzer::ToolAnalyzer(ToolAnalyzer &&) noexcept = default;
-ToolAnalyzer &ToolAnalyzer::operator=(ToolAnalyzer &&) noexcept = default;
+ToolAnalyzer::ToolAnalyzer(ToolAnalyzer&&) noexcept = default;
+ToolAnalyzer& ToolAnalyzer::operator=(ToolAnalyzer&&) noexcept = default;
 
-const std::vector<toollib::ToolModel> &ToolAnalyzer::library() const {
-  return impl_->library;
-}
-const ToolRecognizer &ToolAnalyzer::recognizer() const {
-  return *impl_->recognizer;
-}
+const std::vector<toollib::ToolModel>& ToolAnalyzer::library() const { return impl_->library; }
+const ToolRecognizer& ToolAnalyzer::recognizer() const { return *impl_->recognizer; }
 double ToolAnalyzer::preparation_ms() const { return impl_->preparation_ms; }
 
-FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame &frame) const {
+FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
   FrameAnalysis out;
   auto t = Clock::now();
   out.segments = SegmentTools(frame, impl_->options.segmentation);
   const double segmentation_ms = Ms(t);
   const std::optional<Eigen::Vector3d> p_R_camera = frame.X_RC.translation();
   for (size_t i = 0; i < out.segments.size(); ++i) {
-    const ToolSegment &segment = out.segments[i];
+    const ToolSegment& segment = out.segments[i];
     StageTimes times;
-    times.segmentation_ms =
-        segmentation_ms / static_cast<double>(out.segments.size());
+    times.segmentation_ms = segmentation_ms / static_cast<double>(out.segments.size());
     ToolAnalysis analysis;
     analysis.segment = static_cast<int>(i);
     analysis.roi = segment.roi;
 
     t = Clock::now();
-    ObjectCloud cloud =
-        ExtractObjectCloud(frame, segment.mask, impl_->options.cloud);
+    ObjectCloud cloud = ExtractObjectCloud(frame, segment.mask, impl_->options.cloud);
     times.cloud_ms = Ms(t);
     RecognitionResult recognition;
     if (cloud.status != CloudStatus::kOk) {
@@ -177,12 +158,11 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame &frame) const {
         analysis.reason = recognition.reason;
       } else {
         t = Clock::now();
-        const toollib::ToolModel *model = impl_->Find(recognition.model);
+        const toollib::ToolModel* model = impl_->Find(recognition.model);
         TOOLBENCH_DEMAND(model != nullptr);
         analysis.model = recognition.model;
         analysis.confidence = recognition.confidence;
-        analysis.known =
-            recognition.confidence >= impl_->options.min_known_confidence;
+        analysis.known = recognition.confidence >= impl_->options.min_known_confidence;
         analysis.X_RT = recognition.fit.X_RT;
         analysis.fit_error = recognition.fit.fit_error;
         impl_->PlaceHandle(*model, analysis);
@@ -190,8 +170,7 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame &frame) const {
         times.shape_ms = Ms(t);
       }
     }
-    times.total_ms = times.segmentation_ms + times.cloud_ms +
-                     times.recognition_ms + times.shape_ms;
+    times.total_ms = times.segmentation_ms + times.cloud_ms + times.recognition_ms + times.shape_ms;
     out.tools.push_back(std::move(analysis));
     out.times.push_back(times);
     out.recognition.push_back(std::move(recognition));
@@ -200,4 +179,4 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame &frame) const {
   return out;
 }
 
-} // namespace toolbench::perception
+}  // namespace toolbench::perception

@@ -20,7 +20,7 @@ struct AnalyzerOptions {
   /// A recognised model with a confidence below this is still reported, but
   /// `known` is false (the tool may not be in the library), in [0, 1].
   double min_known_confidence = 0.0;
-  void Validate() const; // throws std::invalid_argument naming the field
+  void Validate() const;  // throws std::invalid_argument naming the field
 
   /// The thesis's configuration (chapter 4) as the baseline to compare against:
   /// point-to-point ICP with 500 iterations and the thesis's epsilons on 4000
@@ -34,20 +34,18 @@ struct AnalyzerOptions {
 struct StageTimes {
   double segmentation_ms = 0.0;
   double cloud_ms = 0.0;
-  double recognition_ms =
-      0.0;               // classification/ranking, model fit and refinement
-  double shape_ms = 0.0; // parts, superquadrics and handle placed in R
+  double recognition_ms = 0.0;  // classification/ranking, model fit and refinement
+  double shape_ms = 0.0;        // parts, superquadrics and handle placed in R
   double total_ms = 0.0;
 };
 
 /// What one frame gave.
 struct FrameAnalysis {
-  std::vector<ToolSegment> segments; // every 2D segment, by decreasing area
-  std::vector<ToolAnalysis> tools;   // one per segment, same order
-  std::vector<StageTimes> times;     // one per segment, same order
-  std::vector<RecognitionResult>
-      recognition; // one per segment (status kTooFewPoints when no cloud)
-  std::vector<ObjectCloud> clouds; // one per segment
+  std::vector<ToolSegment> segments;           // every 2D segment, by decreasing area
+  std::vector<ToolAnalysis> tools;             // one per segment, same order
+  std::vector<StageTimes> times;               // one per segment, same order
+  std::vector<RecognitionResult> recognition;  // one per segment (status kTooFewPoints when no cloud)
+  std::vector<ObjectCloud> clouds;             // one per segment
 };
 
 /// The perception pipeline of one robot: RGB-D frame (and the camera pose from
@@ -56,28 +54,27 @@ struct FrameAnalysis {
 /// structures); Analyze can then be called for many frames. Never reads
 /// anything but the frame and the library.
 class ToolAnalyzer {
-public:
+ public:
   /// Throws std::invalid_argument for bad options or an empty/unusable library.
-  ToolAnalyzer(std::vector<toollib::ToolModel> library,
-               const AnalyzerOptions &options);
+  ToolAnalyzer(std::vector<toollib::ToolModel> library, const AnalyzerOptions& options);
   ~ToolAnalyzer();
-  ToolAnalyzer(ToolAnalyzer &&) noexcept;
-  ToolAnalyzer &operator=(ToolAnalyzer &&) noexcept;
+  ToolAnalyzer(ToolAnalyzer&&) noexcept;
+  ToolAnalyzer& operator=(ToolAnalyzer&&) noexcept;
 
   /// Segments the frame, extracts each tool's cloud, recognises and fits it,
   /// and places its handle. Tools whose cloud or fit fails are still reported,
   /// with a status and reason. Throws std::invalid_argument for a malformed
   /// frame (see SegmentTools, ExtractObjectCloud).
-  FrameAnalysis Analyze(const RgbdFrame &frame) const;
+  FrameAnalysis Analyze(const RgbdFrame& frame) const;
 
   /// The library, in the order the recogniser uses.
-  const std::vector<toollib::ToolModel> &library() const;
+  const std::vector<toollib::ToolModel>& library() const;
   /// The recogniser (for display of model samples).
-  const ToolRecognizer &recognizer() const;
+  const ToolRecognizer& recognizer() const;
   /// Wall time of the construction (library preparation) [ms].
   double preparation_ms() const;
 
-private:
+ private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
@@ -85,9 +82,9 @@ private:
 /// Handle frame H in T of a library model's sidecar handle: origin at its
 /// centre, z_H along its axis, x_H the component of +x_T perpendicular to it
 /// (the effector's working side).
-Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel &model);
+Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel& model);
 
 /// Human-readable name of an AnalysisStatus ("ok", "no_cloud", ...).
-const char *ToString(AnalysisStatus status);
+const char* ToString(AnalysisStatus status);
 
-} // namespace toolbench::perception
+}  // namespace toolbench::perception
