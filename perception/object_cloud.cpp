@@ -1,5 +1,6 @@
 #include "perception/object_cloud.h"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -52,6 +53,7 @@ void ObjectCloudOptions::Validate() const {
   if (roi_margin_px < 0) ThrowInvalid(f, "roi_margin_px = ", roi_margin_px, " (expected >= 0)");
   if (!(min_depth > 0)) ThrowInvalid(f, "min_depth = ", min_depth, " (expected > 0)");
   if (!(max_depth > min_depth)) ThrowInvalid(f, "max_depth = ", max_depth, " (expected > min_depth ", min_depth, ")");
+  if (max_plane_points < 100) ThrowInvalid(f, "max_plane_points = ", max_plane_points, " (expected >= 100)");
   if (max_planes < 0) ThrowInvalid(f, "max_planes = ", max_planes, " (expected >= 0)");
   if (!(plane_distance > 0)) ThrowInvalid(f, "plane_distance = ", plane_distance, " (expected > 0)");
   if (plane_iterations <= 0) ThrowInvalid(f, "plane_iterations = ", plane_iterations, " (expected > 0)");
@@ -96,8 +98,8 @@ ObjectCloud ExtractObjectCloud(const RgbdFrame& frame, const cv::Mat& mask, cons
   const cv::Rect grown = cv::Rect(roi.x - options.roi_margin_px, roi.y - options.roi_margin_px,
                                   roi.width + 2 * options.roi_margin_px, roi.height + 2 * options.roi_margin_px) &
                          cv::Rect(0, 0, mask.cols, mask.rows);
-  auto roi_cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  std::vector<char> roi_in_mask;
+  std::vector<Eigen::Vector3f> roi_points;
+  std::vector<char> roi_points_in_mask;
   std::vector<Eigen::Vector3f> object;
   for (int v = grown.y; v < grown.br().y; ++v) {
     const unsigned char* m = mask.ptr<unsigned char>(v);
@@ -105,10 +107,22 @@ ObjectCloud ExtractObjectCloud(const RgbdFrame& frame, const cv::Mat& mask, cons
     for (int u = grown.x; u < grown.br().x; ++u) {
       if (!UsableDepth(d[u], options.min_depth, options.max_depth)) continue;
       const Eigen::Vector3f p_C = Unproject(frame.intrinsics, u, v, d[u]);
-      roi_cloud->push_back(pcl::PointXYZ(p_C.x(), p_C.y(), p_C.z()));
-      roi_in_mask.push_back(m[u] != 0 ? 1 : 0);
+      roi_points.push_back(p_C);
+      roi_points_in_mask.push_back(m[u] != 0 ? 1 : 0);
       if (m[u] != 0) object.push_back(p_C);
     }
+  }
+  // RANSAC counts inliers over every point in every iteration: an even subsample of the ROI
+  // finds the same support planes at a fraction of the cost (a long tool lying across the
+  // view has a ROI of 50k+ points). Every object point is still tested against the planes.
+  auto roi_cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  std::vector<char> roi_in_mask;
+  const std::size_t stride = std::max<std::size_t>(
+      1, (roi_points.size() + static_cast<std::size_t>(options.max_plane_points) - 1) /
+             static_cast<std::size_t>(options.max_plane_points));
+  for (std::size_t i = 0; i < roi_points.size(); i += stride) {
+    roi_cloud->push_back(pcl::PointXYZ(roi_points[i].x(), roi_points[i].y(), roi_points[i].z()));
+    roi_in_mask.push_back(roi_points_in_mask[i]);
   }
   result.valid_depth = static_cast<int>(object.size());
   if (object.empty()) {

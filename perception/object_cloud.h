@@ -18,6 +18,8 @@ struct ObjectCloudOptions {
   int max_planes = 2;              // support planes (board, ledge, table) removed at most, >= 0
   double plane_distance = 0.003;   // RANSAC inlier distance; mask points closer to a found plane
                                    // are removed [m], > 0. Small, because flat blades lie on the board
+  int max_plane_points = 4000;     // RANSAC runs on an even subsample of at most this many ROI
+                                   // points (all object points are still tested), >= 100
   int plane_iterations = 500;      // RANSAC iterations per plane (PCL, fixed seed), > 0
   double min_plane_fraction = 0.15;  // a plane must hold this fraction of the ROI points to count
                                      // as support, in (0, 1]
