@@ -48,6 +48,7 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
   options.shard_index = request.shard_index;
   options.shard_count = request.shard_count;
   options.limit = request.limit;
+  options.filter = request.filter;
   options.jobs = request.jobs;
   options.resume = request.resume;
   options.isolate = request.isolate;

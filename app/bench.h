@@ -19,6 +19,8 @@ struct BenchRequest {
   int shard_index = 0;            // this process runs cases i with i % shard_count == shard_index
   int shard_count = 1;            // >= 1
   int limit = 0;                  // run at most this many cases (0 = all), for quick looks
+  std::string filter;             // regex on case ids ("hoe_1/rot.*"); empty = all
+  int episodes = 50;              // episode protocols: how many episodes, >= 1
   int jobs = 1;                   // cases run at once, each in its own child process, >= 1
   bool resume = false;            // skip cases already recorded in out_dir/results.jsonl
   bool isolate = true;            // false: run cases in this process (for a debugger)

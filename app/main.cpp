@@ -186,6 +186,8 @@ int main(int argc, char** argv) {
     bench->add_option("--limit", bench_request.limit, "Run at most this many cases (0 = all)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
+    bench->add_option("--filter", bench_request.filter,
+                      "Only cases whose id matches this regular expression (ids: table53 'hoe_1/rot2')");
     bench->add_option("--jobs", bench_request.jobs, "Cases run at once, each in its own process")
         ->check(CLI::PositiveNumber)
         ->capture_default_str();

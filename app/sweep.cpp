@@ -13,6 +13,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <regex>
 #include <set>
 #include <thread>
 
@@ -226,12 +227,20 @@ std::vector<SweepLine> RunSweep(const SweepOptions& options, const std::vector<S
   info["shard_index"] = options.shard_index;
   info["shard_count"] = options.shard_count;
   info["limit"] = options.limit;
+  info["filter"] = options.filter;
   WriteTextFile(options.out_dir / "run.json", info.dump(2) + "\n");
 
+  std::regex filter;
+  try {
+    filter = std::regex(options.filter.empty() ? ".*" : options.filter);
+  } catch (const std::regex_error& e) {
+    ThrowInvalid("RunSweep: filter '", options.filter, "' is not a valid regular expression (", e.what(), ")");
+  }
   std::vector<SweepCase> pending;
   int in_shard = 0;
   for (const SweepCase& c : cases) {
     if (c.index % options.shard_count != options.shard_index) continue;
+    if (!std::regex_search(c.id, filter)) continue;
     if (options.limit > 0 && in_shard >= options.limit) break;
     ++in_shard;
     if (finished.count(c.id) == 0) pending.push_back(c);

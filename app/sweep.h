@@ -21,6 +21,7 @@ struct SweepOptions {
   std::string protocol;                                // recorded in run.json and every line
   int shard_index = 0;                                 // run cases with index % shard_count == shard_index
   int shard_count = 1;                                 // >= 1
+  std::string filter;                                  // ECMAScript regex: only cases whose id it matches (empty = all)
   int limit = 0;                                       // at most this many cases of the shard (0 = all)
   int jobs = 1;                                        // child processes at once, >= 1
   bool resume = false;                                 // skip cases already in results.jsonl (ok or failed)

@@ -83,6 +83,19 @@ TEST(SweepTest, ShardsAreDisjointAndMergeToTheWholeSweep) {
   for (int i = 0; i < 7; ++i) EXPECT_EQ(merged[i]["result"]["y"], i * i);
 }
 
+TEST(SweepTest, FilterSelectsCasesByIdAndABadRegexIsNamed) {
+  SweepOptions options;
+  options.out_dir = TempDir("filter");
+  options.protocol = "test";
+  options.filter = "case[13]$";
+  const auto lines = RunSweep(options, Cases(5), Square);
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[0]["id"], "case1");
+  EXPECT_EQ(lines[1]["id"], "case3");
+  options.filter = "case[";
+  EXPECT_THROW(RunSweep(options, Cases(5), Square), std::invalid_argument);
+}
+
 TEST(SweepTest, ResumeSkipsFinishedCases) {
   SweepOptions options;
   options.out_dir = TempDir("resume");
