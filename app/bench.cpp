@@ -49,6 +49,7 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
   options.shard_count = request.shard_count;
   options.limit = request.limit;
   options.filter = request.filter;
+  options.case_timeout_s = request.case_timeout_s;
   options.jobs = request.jobs;
   options.resume = request.resume;
   options.isolate = request.isolate;

@@ -21,6 +21,7 @@ struct BenchRequest {
   int limit = 0;                  // run at most this many cases (0 = all), for quick looks
   std::string filter;             // regex on case ids ("hoe_1/rot.*"); empty = all
   int episodes = 50;              // episode protocols: how many episodes, >= 1
+  double case_timeout_s = 900;    // a case running longer is killed and recorded as failed [s], > 0
   int jobs = 1;                   // cases run at once, each in its own child process, >= 1
   bool resume = false;            // skip cases already recorded in out_dir/results.jsonl
   bool isolate = true;            // false: run cases in this process (for a debugger)

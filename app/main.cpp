@@ -188,6 +188,10 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     bench->add_option("--filter", bench_request.filter,
                       "Only cases whose id matches this regular expression (ids: table53 'hoe_1/rot2')");
+    bench->add_option("--case-timeout", bench_request.case_timeout_s,
+                      "Kill a case running longer than this and record it as failed [s]")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
     bench->add_option("--jobs", bench_request.jobs, "Cases run at once, each in its own process")
         ->check(CLI::PositiveNumber)
         ->capture_default_str();
