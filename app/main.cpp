@@ -14,6 +14,7 @@
 #include "app/bench.h"
 #include "app/capture.h"
 #include "app/perceive.h"
+#include "app/train_recognizer.h"
 #include "app/frame_io.h"
 #include "app/scene_setup.h"
 #include "common/check.h"
@@ -148,6 +149,34 @@ int main(int argc, char** argv) {
   AddSceneOptions(perceive, perceive_request);
   perceive->add_option("--out", perceive_out, "Output folder (default: runs/perceive-seed<N>)");
   perceive->add_flag("--no-noise", perceive_no_noise, "Ideal images: switch the sensor noise model off");
+  std::filesystem::path perceive_classifier = app::DefaultClassifierPath();
+  bool perceive_no_classifier = false;
+  perceive->add_option("--classifier", perceive_classifier,
+                       "Tool classifier file (toolbench train-recognizer)")
+      ->capture_default_str();
+  perceive->add_flag("--no-classifier", perceive_no_classifier,
+                     "Recognise without the classifier: extent pre-selection and fit scores only");
+
+  app::TrainRecognizerRequest train_request;
+  CLI::App* train = cli.add_subcommand(
+      "train-recognizer",
+      "Render random rack scenes (1-3 tools each, random cells), segment them, label each segment with the "
+      "ground-truth tool it shows, train the tool classifier (random forest over pose-invariant features) "
+      "and report its accuracy on held-out scenes: dataset.csv, heldout.csv, tool_classifier.yml.gz, "
+      "training_report.json. The shipped assets/models/tool_classifier.yml.gz is made with "
+      "--seed 1 --scenes 800 --heldout 200 --trees 100");
+  AddSeedOption(train, train_request.seed);
+  train->add_option("--scenes", train_request.scenes, "Training scenes")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  train->add_option("--heldout", train_request.heldout_scenes,
+                    "Held-out scenes, on seeds disjoint from the training ones (0 = scenes/4)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  train->add_option("--trees", train_request.classifier.trees, "Trees in the forest")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  train->add_option("--out", train_request.out_dir, "Output folder")->required();
 
   app::SceneRequest scene_request;
   std::filesystem::path scene_save;
@@ -229,9 +258,11 @@ int main(int argc, char** argv) {
       if (perceive_out.empty()) perceive_out = "runs/perceive-seed" + std::to_string(perceive_request.seed);
       app::CaptureOptions options;
       options.noise = !perceive_no_noise;
-      return app::RunPerceive(perceive_request, perceive_out, options);
+      return app::RunPerceive(perceive_request, perceive_out, options,
+                              perceive_no_classifier ? std::filesystem::path() : perceive_classifier);
     }
     if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
+    if (train->parsed()) return app::RunTrainRecognizer(train_request);
     if (bench->parsed()) {
       const auto slash = shard.find('/');
       try {

@@ -1,8 +1,11 @@
 #include "app/perceive.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <iostream>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -14,6 +17,8 @@
 #include "common/paths.h"
 #include "perception/model_fit.h"
 #include "perception/object_cloud.h"
+#include "perception/recognition_features.h"
+#include "perception/tool_classifier.h"
 #include "perception/segmentation.h"
 
 namespace toolbench::app {
@@ -23,6 +28,14 @@ using Clock = std::chrono::steady_clock;
 
 double Ms(Clock::time_point since) {
   return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
+}
+
+// CPU time of the process (all threads) [ms]: unlike wall time, it does not grow when other
+// processes share the cores, so it measures the work itself.
+double ProcessCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
 nlohmann::json Vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
@@ -54,8 +67,12 @@ cv::Mat DrawSegments(const RgbdFrame& frame, const std::vector<perception::ToolS
 
 }  // namespace
 
+std::filesystem::path DefaultClassifierPath() { return AssetsDir() / "models" / "tool_classifier.yml.gz"; }
+
 int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir,
-                const CaptureOptions& options) {
+                const CaptureOptions& options, const std::filesystem::path& classifier_path) {
+  std::optional<perception::ToolClassifier> classifier;
+  if (!classifier_path.empty()) classifier = perception::ToolClassifier::Load(classifier_path);
   sim::GlContext gl;
   const Capture capture = CaptureFrame(request, options, gl);
   WriteFrame(out_dir, capture.frame, CaptureMetadata(capture, request, options));
@@ -67,14 +84,20 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
   const RgbdFrame& frame = capture.frame;
   auto t = Clock::now();
   const perception::ToolRecognizer recognizer(library, perception::RecognitionOptions{});
+  const std::vector<std::string> names = recognizer.model_names();
+  if (classifier) classifier->RequireLibrary(names);
   const double prepare_ms = Ms(t);
   t = Clock::now();
+  double cpu = ProcessCpuMs();
   const std::vector<perception::ToolSegment> segments = perception::SegmentTools(frame, {});
   const double segment_ms = Ms(t);
+  const double segment_cpu_ms = ProcessCpuMs() - cpu;
 
   nlohmann::json analysis;
   analysis["library_preparation_ms"] = prepare_ms;
   analysis["segmentation_ms"] = segment_ms;
+  analysis["segmentation_cpu_ms"] = segment_cpu_ms;
+  analysis["classifier"] = classifier ? classifier_path.string() : "none (extent pre-selection)";
   analysis["tools"] = nlohmann::json::array();
   std::vector<std::string> labels;
   std::vector<perception::RecognitionResult> results;
@@ -86,12 +109,15 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
                        {"mean_hue_deg", segment.mean_hue_deg},
                        {"median_depth_m", segment.median_depth}};
     t = Clock::now();
+    const double tool_cpu_start = ProcessCpuMs();
     const perception::ObjectCloud cloud = perception::ExtractObjectCloud(frame, segment.mask, {});
     const double cloud_ms = Ms(t);
+    const double cloud_cpu_ms = ProcessCpuMs() - tool_cpu_start;
     tool["cloud"] = {{"points", cloud.p_R.cols()},       {"masked_pixels", cloud.masked_pixels},
                      {"valid_depth", cloud.valid_depth}, {"plane_points", cloud.plane_points},
                      {"outliers", cloud.outlier_points}, {"reason", cloud.reason}};
     tool["ms"] = {{"cloud", cloud_ms}};
+    tool["cpu_ms"] = {{"cloud", cloud_cpu_ms}};
     perception::RecognitionResult result;
     if (cloud.status != perception::CloudStatus::kOk) {
       result.reason = cloud.reason;
@@ -99,9 +125,27 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
       tool["reason"] = cloud.reason;
       labels.push_back("?");
     } else {
+      std::vector<double> prior;
+      if (classifier) {
+        t = Clock::now();
+        cpu = ProcessCpuMs();
+        const std::vector<float> features = perception::ComputeRecognitionFeatures(
+            cloud.p_R, segment.mask, frame.intrinsics, segment.median_depth, {});
+        prior = classifier->PredictForLibrary(features, names);
+        tool["ms"]["features"] = Ms(t);
+        tool["cpu_ms"]["features"] = ProcessCpuMs() - cpu;
+      }
       t = Clock::now();
-      result = recognizer.Recognize(cloud.p_R, frame.X_RC.translation());
+      cpu = ProcessCpuMs();
+      result = recognizer.Recognize(cloud.p_R, frame.X_RC.translation(), prior);
       tool["ms"]["recognition_and_fit"] = Ms(t);
+      tool["cpu_ms"]["recognition_and_fit"] = ProcessCpuMs() - cpu;
+      tool["candidates"] = nlohmann::json::array();
+      for (const perception::ModelScore& s : result.scores) {
+        if (!s.fitted) continue;
+        tool["candidates"].push_back({{"model", s.model}, {"prior", s.prior}, {"score_m", s.score},
+                                      {"posterior", s.posterior}});
+      }
       if (result.status != perception::FitStatus::kOk) {
         tool["status"] = "not_recognised";
         tool["reason"] = result.reason;
@@ -153,23 +197,41 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
       for (int c = 0; c < 4; ++c) M(r, c) = true_tool["X_RT"]["matrix"][r][c];
     }
     const Eigen::Isometry3d X_RT_true(M);
-    const Eigen::Vector3d handle_true = X_RT_true * model->handle.center;
-    const Eigen::Vector3d axis_true = X_RT_true.linear().col(2);
+    // A tool symmetric end over end (a stick) is equally right either way up.
+    std::vector<Eigen::Isometry3d> truths = {X_RT_true};
+    if (std::find(model->symmetries.begin(), model->symmetries.end(), "rot_x_180") != model->symmetries.end()) {
+      Eigen::Isometry3d flip = Eigen::Isometry3d::Identity();
+      flip.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+      flip.translation() = Eigen::Vector3d(0, 0, model->total_length);
+      truths.push_back(X_RT_true * flip);
+    }
     nlohmann::json entry{{"name", true_tool["name"]}, {"cell", true_tool["cell"]}};
     double best = 1e9;
     for (size_t i = 0; i < results.size(); ++i) {
       if (results[i].status != perception::FitStatus::kOk) continue;
       const toollib::ToolModel* fitted = FindModel(library, results[i].model);
       const Eigen::Vector3d handle = results[i].fit.X_RT * fitted->handle.center;
-      const double error = (handle - handle_true).norm();
-      if (error < best) {
+      for (const Eigen::Isometry3d& truth : truths) {
+        const double error = (handle - truth * model->handle.center).norm();
+        if (error >= best) continue;
         best = error;
         const Eigen::Vector3d axis = results[i].fit.X_RT.linear().col(2);
+        // The effector protrudes along +x_T: it faces the right way when x_T agrees.
+        const Eigen::Vector3d effector = results[i].fit.X_RT.linear().col(0);
         entry["segment"] = i;
         entry["recognised_as"] = results[i].model;
         entry["recognition_correct"] = results[i].model == true_tool["name"];
+        entry["confidence"] = results[i].confidence;
         entry["handle_error_m"] = error;
-        entry["axis_error_deg"] = std::acos(std::clamp(axis.dot(axis_true), -1.0, 1.0)) * 180.0 / M_PI;
+        entry["axis_error_deg"] =
+            std::acos(std::clamp(axis.dot(truth.linear().col(2)), -1.0, 1.0)) * 180.0 / M_PI;
+        // A tool of any spin about its axis (a stick) has no effector direction to get wrong.
+        const bool any_spin =
+            std::find(model->symmetries.begin(), model->symmetries.end(), "rot_z_any") != model->symmetries.end();
+        if (!any_spin) {
+          entry["effector_error_deg"] =
+              std::acos(std::clamp(effector.dot(truth.linear().col(0)), -1.0, 1.0)) * 180.0 / M_PI;
+        }
       }
     }
     if (best > 1e8) entry["missed"] = true;

@@ -15,9 +15,15 @@ namespace toolbench::app {
 ///   segments.png   the image with each segment's contour, box and label
 ///   tool_<i>.ply   the object cloud (grey) with the fitted model's samples (colour), in R
 ///   score.json     evaluation against ground truth (never read by perception)
+/// `classifier_path` names a ToolClassifier file (the learned recogniser, whose probabilities
+/// pick the models to verify); empty = no classifier, the extent-based pre-selection.
 /// Returns 0 when perception ran (even if some tools were not recognised: they are recorded
-/// with their reason). Throws std::invalid_argument for bad requests.
+/// with their reason). Throws std::invalid_argument for bad requests, a missing or corrupt
+/// classifier file, or a classifier trained for another library.
 int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir,
-                const CaptureOptions& options);
+                const CaptureOptions& options, const std::filesystem::path& classifier_path);
+
+/// The shipped classifier: assets/models/tool_classifier.yml.gz.
+std::filesystem::path DefaultClassifierPath();
 
 }  // namespace toolbench::app

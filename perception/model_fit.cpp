@@ -1,6 +1,7 @@
 #include "perception/model_fit.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -45,6 +46,19 @@ Cloud::Ptr ToPcl(const Eigen::Matrix3Xf& points, const Eigen::Matrix3Xf* normals
   return cloud;
 }
 
+// Damped point-to-plane ICP (linearised rotation, as PCL's TransformationEstimationPointToPlaneLLS)
+// of `source` (observed points) onto `model` (points with unit normals), starting from X_TR.
+// Written out instead of pcl::IterativeClosestPoint because ICP is the whole cost of recognition
+// and PCL's loop copies and transforms the source cloud, allocates correspondence vectors and
+// runs a rejector every iteration: this loop makes one nearest-neighbour query per point and
+// nothing else (2-3x faster on the few hundred points ranking uses). The small Levenberg damping
+// matters: PCL's LLS inverts the 6x6 normal matrix outright, which is singular for a shape
+// symmetric about an axis (a stick's spin is unobservable) and returns NaN; damping leaves the
+// unobservable direction unchanged instead. Stopping rules follow PCL's
+// DefaultConvergenceCriteria as pcl::IterativeClosestPoint sets them up: the iteration cap; a
+// step with squared translation <= transformation_epsilon [m^2] and rotation cosine >=
+// 1 - transformation_epsilon; or a relative change of the mean squared correspondence distance
+// below euclidean_fitness_epsilon (PCL's absolute threshold, 1e-12 m^2, is never the binding one).
 // Point-to-plane step (linearised rotation, as PCL's TransformationEstimationPointToPlaneLLS)
 // with a small Levenberg damping. PCL's version inverts the 6x6 normal matrix outright, which
 // is singular for a shape symmetric about an axis (a stick's spin is unobservable): the NaN it
@@ -103,6 +117,87 @@ class DampedPointToPlane : public pcl::registration::TransformationEstimation<Po
     T = step.allFinite() ? Matrix4(step.cast<float>()) : Matrix4::Identity();
   }
 };
+
+constexpr int kStallIterations = 10;
+constexpr double kStallImprovement = 1e-4;  // relative MSE improvement that counts as progress
+
+struct IcpLimits {
+  int iterations = 1;
+  double max_correspondence_distance = 0.05;
+  double transformation_epsilon = 1e-9;
+  double euclidean_fitness_epsilon = 1e-6;
+};
+
+// The step is linearised about `p_T_centre` (the model's centroid), not about the frame origin:
+// the tool frame's origin is at one end of the tool, and rotations about a far point couple with
+// translations, which made the damped step crawl for hundreds of iterations.
+Eigen::Isometry3d PointToPlaneIcp(const Cloud& source, const Cloud& model, const pcl::search::KdTree<Point>& tree,
+                                  const Eigen::Vector3d& p_T_centre, Eigen::Isometry3d X_TR, const IcpLimits& limits,
+                                  bool& converged) {
+  converged = false;
+  pcl::Indices index(1);
+  std::vector<float> sq_distance(1);
+  const float max_sq = static_cast<float>(limits.max_correspondence_distance * limits.max_correspondence_distance);
+  double previous_mse = std::numeric_limits<double>::infinity();
+  double best_mse = std::numeric_limits<double>::infinity();
+  int stalled = 0;  // iterations since the MSE last improved by kStallImprovement
+  Point query;
+  query.getNormalVector3fMap() = Eigen::Vector3f::Zero();
+  for (int iteration = 0; iteration < limits.iterations; ++iteration) {
+    const Eigen::Matrix3f R = X_TR.linear().cast<float>();
+    const Eigen::Vector3f t = X_TR.translation().cast<float>();
+    Eigen::Matrix<double, 6, 6> AtA = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> Atb = Eigen::Matrix<double, 6, 1>::Zero();
+    double sum_sq = 0.0;
+    int pairs = 0;
+    for (const Point& s : source) {
+      query.getVector3fMap() = R * s.getVector3fMap() + t;
+      if (tree.nearestKSearch(query, 1, index, sq_distance) < 1 || sq_distance[0] > max_sq) continue;
+      const Point& m = model[static_cast<std::size_t>(index[0])];
+      const Eigen::Vector3d p = query.getVector3fMap().cast<double>() - p_T_centre;
+      const Eigen::Vector3d n = m.getNormalVector3fMap().cast<double>();
+      Eigen::Matrix<double, 6, 1> a;
+      a << p.cross(n), n;
+      AtA.selfadjointView<Eigen::Upper>().rankUpdate(a);
+      Atb += a * n.dot(m.getVector3fMap().cast<double>() - p_T_centre - p);
+      sum_sq += sq_distance[0];
+      ++pairs;
+    }
+    if (pairs < 6) break;  // too few correspondences: keep the pose (PCL gives up the same way)
+    AtA.triangularView<Eigen::Lower>() = AtA.transpose();
+    const double damping = 1e-4 * AtA.trace() / 6.0 + 1e-12;
+    AtA.diagonal().array() += damping;
+    const Eigen::Matrix<double, 6, 1> x = AtA.ldlt().solve(Atb);
+    if (!x.allFinite()) break;
+    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
+    const Eigen::Vector3d omega = x.head<3>();
+    if (omega.norm() > 0) step.linear() = Eigen::AngleAxisd(omega.norm(), omega.normalized()).toRotationMatrix();
+    // Rotation about the centre c, then translation: p -> R (p - c) + c + t.
+    step.translation() = p_T_centre - step.linear() * p_T_centre + x.tail<3>();
+    X_TR = step * X_TR;
+    const double mse = sum_sq / pairs;
+    const double cosine = (step.linear().trace() - 1.0) / 2.0;
+    if ((cosine >= 1.0 - limits.transformation_epsilon &&
+         step.translation().squaredNorm() <= limits.transformation_epsilon) ||
+        std::abs(mse - previous_mse) < 1e-12 ||
+        std::abs(mse - previous_mse) < limits.euclidean_fitness_epsilon * previous_mse) {
+      converged = true;
+      break;
+    }
+    // Correspondences that flip between a thin blade's two faces make the pose oscillate by a
+    // fraction of a degree with the MSE jittering above PCL's relative threshold until the cap;
+    // no real progress for kStallIterations iterations ends the loop too.
+    if (mse < best_mse * (1.0 - kStallImprovement)) {
+      best_mse = mse;
+      stalled = 0;
+    } else if (++stalled >= kStallIterations) {
+      converged = true;
+      break;
+    }
+    previous_mse = mse;
+  }
+  return X_TR;
+}
 
 // Principal frame of a cloud: centroid and right-handed axes (columns), largest variance first.
 struct PrincipalFrame {
@@ -213,18 +308,38 @@ void ModelFitOptions::Validate() const {
     ThrowInvalid(f, "coarse_points = ", coarse_points, " (expected >= ", kMinFitPoints, ")");
   }
   if (coarse_iterations <= 0) ThrowInvalid(f, "coarse_iterations = ", coarse_iterations, " (expected > 0)");
+  if (screen_iterations < 0) ThrowInvalid(f, "screen_iterations = ", screen_iterations, " (expected >= 0)");
+  if (screen_keep <= 0) ThrowInvalid(f, "screen_keep = ", screen_keep, " (expected > 0)");
+  if (spin_steps < 1 || spin_steps > 36) ThrowInvalid(f, "spin_steps = ", spin_steps, " (expected in [1, 36])");
   if (!(visible_distance > 0)) ThrowInvalid(f, "visible_distance = ", visible_distance, " (expected > 0)");
   if (visible_rounds < 0) ThrowInvalid(f, "visible_rounds = ", visible_rounds, " (expected >= 0)");
   if (!(unexplained_weight >= 0)) {
     ThrowInvalid(f, "unexplained_weight = ", unexplained_weight, " (expected >= 0)");
+  }
+  if (score_model_points < kMinFitPoints) {
+    ThrowInvalid(f, "score_model_points = ", score_model_points, " (expected >= ", kMinFitPoints, ")");
   }
 }
 
 void RecognitionOptions::Validate() const {
   fit.Validate();
   if (max_models <= 0) ThrowInvalid("RecognitionOptions::Validate: max_models = ", max_models, " (expected > 0)");
-  if (ranking_iterations <= 0) {
-    ThrowInvalid("RecognitionOptions::Validate: ranking_iterations = ", ranking_iterations, " (expected > 0)");
+  if (verify_points < kMinFitPoints) {
+    ThrowInvalid("RecognitionOptions::Validate: verify_points = ", verify_points, " (expected >= ", kMinFitPoints, ")");
+  }
+  if (verify_iterations <= 0) {
+    ThrowInvalid("RecognitionOptions::Validate: verify_iterations = ", verify_iterations, " (expected > 0)");
+  }
+  if (max_classifier_candidates <= 0) {
+    ThrowInvalid("RecognitionOptions::Validate: max_classifier_candidates = ", max_classifier_candidates,
+                 " (expected > 0)");
+  }
+  if (!(min_classifier_probability >= 0 && min_classifier_probability < 1)) {
+    ThrowInvalid("RecognitionOptions::Validate: min_classifier_probability = ", min_classifier_probability,
+                 " (expected in [0, 1))");
+  }
+  if (!(classifier_mass > 0 && classifier_mass <= 1)) {
+    ThrowInvalid("RecognitionOptions::Validate: classifier_mass = ", classifier_mass, " (expected in (0, 1])");
   }
   if (!(confidence_scale > 0)) {
     ThrowInvalid("RecognitionOptions::Validate: confidence_scale = ", confidence_scale, " (expected > 0)");
@@ -239,31 +354,64 @@ struct ModelFitter::Impl {
   Eigen::Vector3d extents = Eigen::Vector3d::Zero();
   Cloud::Ptr target;
   pcl::search::KdTree<Point>::Ptr target_tree;
+  SurfaceSamples score_samples;  // evenly picked subset of `samples` for the unexplained fraction
+
+  // The observed cloud in the forms a fit uses, built once per Search or Refine.
+  struct Observation {
+    Eigen::Matrix3Xf observed;     // at most max_observed_points
+    Cloud::Ptr source;
+    Eigen::Matrix3Xf coarse;       // at most coarse_points
+    Cloud::Ptr coarse_source;
+    pcl::KdTreeFLANN<Point> tree;  // over `observed`, only with a camera
+  };
+
+  void Observe(const Eigen::Matrix3Xf& p_R, bool with_camera, int max_points, Observation& o) const {
+    o.observed = EvenSubsample(p_R, max_points);
+    o.source = ToPcl(o.observed);
+    // The candidates only need ranking: a sparser cloud does it at a fraction of the cost.
+    o.coarse = EvenSubsample(o.observed, options.coarse_points);
+    o.coarse_source = ToPcl(o.coarse);
+    // The unexplained test asks "is any observed point within visible_distance (1 cm)": the
+    // subsampled cloud (spacing a few mm) answers it as well as the full one, at a lower cost.
+    if (with_camera) o.tree.setInputCloud(ToPcl(o.observed));
+  }
 
   // Runs ICP from X_TR_guess (observed R -> model T) and returns the refined X_TR.
   Eigen::Isometry3d RunIcp(const Cloud::Ptr& source, const Eigen::Isometry3d& X_TR_guess,
-                           int iterations, bool& converged) const {
-    return RunIcpOn(target, target_tree, source, X_TR_guess, iterations, converged);
+                           int iterations, bool own_loop, bool& converged) const {
+    return RunIcpOn(target, target_tree, source, X_TR_guess, iterations, own_loop, converged);
   }
 
   Eigen::Isometry3d RunIcpOn(const Cloud::Ptr& model, const pcl::search::KdTree<Point>::Ptr& model_tree,
                              const Cloud::Ptr& source, const Eigen::Isometry3d& X_TR_guess, int iterations,
-                             bool& converged) const {
-    pcl::IterativeClosestPoint<Point, Point> icp;
-    if (options.metric == IcpMetric::kPointToPlane) icp.setTransformationEstimation(std::make_shared<DampedPointToPlane>());
-    icp.setInputSource(source);
-    icp.setInputTarget(model);
-    // The tree over the model is built once; force_no_recompute keeps ICP from rebuilding it
-    // on every call.
-    icp.setSearchMethodTarget(model_tree, true);
-    icp.setMaximumIterations(iterations);
-    icp.setTransformationEpsilon(options.transformation_epsilon);
-    icp.setEuclideanFitnessEpsilon(options.euclidean_fitness_epsilon);
-    icp.setMaxCorrespondenceDistance(options.max_correspondence_distance);
-    Cloud aligned;
-    icp.align(aligned, X_TR_guess.matrix().cast<float>());
-    converged = icp.hasConverged();
-    Eigen::Isometry3d X_TR(icp.getFinalTransformation().cast<double>());
+                             bool own_loop, bool& converged) const {
+    Eigen::Isometry3d X_TR = X_TR_guess;
+    if (options.metric == IcpMetric::kPointToPlane && own_loop) {
+      IcpLimits limits;
+      limits.iterations = iterations;
+      limits.max_correspondence_distance = options.max_correspondence_distance;
+      limits.transformation_epsilon = options.transformation_epsilon;
+      limits.euclidean_fitness_epsilon = options.euclidean_fitness_epsilon;
+      X_TR = PointToPlaneIcp(*source, *model, *model_tree, frame.centroid, X_TR_guess, limits, converged);
+    } else {
+      // PCL's ICP: the thesis's point-to-point baseline, and the final point-to-plane refinement
+      // (PCL's loop converged to better poses on thin blades in our tests; it runs once per tool).
+      pcl::IterativeClosestPoint<Point, Point> icp;
+      if (options.metric == IcpMetric::kPointToPlane) icp.setTransformationEstimation(std::make_shared<DampedPointToPlane>());
+      icp.setInputSource(source);
+      icp.setInputTarget(model);
+      // The tree over the model is built once; force_no_recompute keeps ICP from rebuilding it
+      // on every call.
+      icp.setSearchMethodTarget(model_tree, true);
+      icp.setMaximumIterations(iterations);
+      icp.setTransformationEpsilon(options.transformation_epsilon);
+      icp.setEuclideanFitnessEpsilon(options.euclidean_fitness_epsilon);
+      icp.setMaxCorrespondenceDistance(options.max_correspondence_distance);
+      Cloud aligned;
+      icp.align(aligned, X_TR_guess.matrix().cast<float>());
+      converged = icp.hasConverged();
+      X_TR = Eigen::Isometry3d(icp.getFinalTransformation().cast<double>());
+    }
     const auto usable = [](const Eigen::Isometry3d& X) {
       return X.matrix().allFinite() && std::abs(X.linear().determinant() - 1.0) < 0.1;
     };
@@ -280,7 +428,7 @@ struct ModelFitter::Impl {
   // Mean observed -> model distance for X_RT, and the unexplained visible model fraction.
   void Score(const Eigen::Matrix3Xf& observed, const pcl::KdTreeFLANN<Point>* observed_tree,
              const std::optional<Eigen::Vector3d>& p_R_camera, const Eigen::Isometry3d& X_RT,
-             double& fit_error, double& unexplained) const {
+             const SurfaceSamples& model_samples, double& fit_error, double& unexplained) const {
     const Eigen::Isometry3d X_TR = X_RT.inverse();
     std::vector<int> index(1);
     std::vector<float> sq_distance(1);
@@ -296,9 +444,9 @@ struct ModelFitter::Impl {
     int visible = 0;
     int missing = 0;
     const double limit_sq = options.visible_distance * options.visible_distance;
-    for (Eigen::Index i = 0; i < samples.points.cols(); ++i) {
-      const Eigen::Vector3d p = X_RT * samples.points.col(i).cast<double>();
-      const Eigen::Vector3d n = X_RT.linear() * samples.normals.col(i).cast<double>();
+    for (Eigen::Index i = 0; i < model_samples.points.cols(); ++i) {
+      const Eigen::Vector3d p = X_RT * model_samples.points.col(i).cast<double>();
+      const Eigen::Vector3d n = X_RT.linear() * model_samples.normals.col(i).cast<double>();
       if (n.dot(*p_R_camera - p) <= 0) continue;
       ++visible;
       observed_tree->nearestKSearch(MakePoint(p), 1, index, sq_distance);
@@ -320,6 +468,15 @@ ModelFitter::ModelFitter(const toollib::ToolModel& model, const ModelFitOptions&
   impl_->target = ToPcl(impl_->samples.points, &impl_->samples.normals);
   impl_->target_tree = std::make_shared<pcl::search::KdTree<Point>>();
   impl_->target_tree->setInputCloud(impl_->target);
+  const Eigen::Index count = std::min<Eigen::Index>(options.score_model_points, impl_->samples.points.cols());
+  impl_->score_samples.points.resize(3, count);
+  impl_->score_samples.normals.resize(3, count);
+  const double stride = static_cast<double>(impl_->samples.points.cols()) / static_cast<double>(count);
+  for (Eigen::Index i = 0; i < count; ++i) {
+    const auto j = static_cast<Eigen::Index>(static_cast<double>(i) * stride);
+    impl_->score_samples.points.col(i) = impl_->samples.points.col(j);
+    impl_->score_samples.normals.col(i) = impl_->samples.normals.col(j);
+  }
 }
 
 ModelFitter::~ModelFitter() = default;
@@ -332,7 +489,14 @@ const Eigen::Vector3d& ModelFitter::principal_extents() const { return impl_->ex
 
 ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
                                 const std::optional<Eigen::Vector3d>& p_R_camera) const {
-  RequireFinite(p_R, "ModelFitter::Fit");
+  ModelFitResult searched = Search(p_R, p_R_camera);
+  if (searched.status != FitStatus::kOk) return searched;
+  return Refine(p_R, p_R_camera, std::move(searched));
+}
+
+ModelFitResult ModelFitter::Search(const Eigen::Matrix3Xf& p_R,
+                                   const std::optional<Eigen::Vector3d>& p_R_camera) const {
+  RequireFinite(p_R, "ModelFitter::Search");
   ModelFitResult result;
   result.model = impl_->name;
   if (p_R.cols() < kMinFitPoints) {
@@ -341,28 +505,31 @@ ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
     return result;
   }
   const ModelFitOptions& options = impl_->options;
-  const Eigen::Matrix3Xf observed = EvenSubsample(p_R, options.max_observed_points);
-  const Cloud::Ptr source = ToPcl(observed);
-  // The candidates only need ranking: a sparser cloud does it at a fraction of the cost.
-  const Eigen::Matrix3Xf coarse = EvenSubsample(observed, options.coarse_points);
-  const Cloud::Ptr coarse_source = ToPcl(coarse);
-  pcl::KdTreeFLANN<Point> observed_tree;
-  if (p_R_camera) observed_tree.setInputCloud(ToPcl(p_R));
+  Impl::Observation o;
+  impl_->Observe(p_R, p_R_camera.has_value(), options.max_observed_points, o);
 
   // Principal axes of the observation mapped onto the model's: R_RT m_i = o_i.
-  const PrincipalFrame seen = ComputePrincipalFrame(observed);
+  const PrincipalFrame seen = ComputePrincipalFrame(o.observed);
   const PrincipalFrame& model = impl_->frame;
   std::vector<std::pair<std::string, Eigen::Matrix3d>> turns;  // in the model's principal frame
   for (int reversed = 0; reversed < 2; ++reversed) {
-    for (int quarter = 0; quarter < 4; ++quarter) {
-      if (!options.try_flips && (reversed != 0 || quarter != 0)) continue;
-      Eigen::Matrix3d turn =
-          Eigen::AngleAxisd(quarter * M_PI / 2, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    for (int step = 0; step < options.spin_steps; ++step) {
+      if (!options.try_flips && (reversed != 0 || step != 0)) continue;
+      const int degrees = step * 360 / options.spin_steps;
+      Eigen::Matrix3d turn = Eigen::AngleAxisd(degrees * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix();
       if (reversed != 0) turn = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix() * turn;
-      turns.emplace_back(Cat(reversed != 0 ? "rev_" : "main_", quarter * 90), turn);
+      turns.emplace_back(Cat(reversed != 0 ? "rev_" : "main_", degrees), turn);
     }
   }
-  double best_score = std::numeric_limits<double>::infinity();
+  const auto score = [&](FitCandidate& candidate) {
+    impl_->Score(o.coarse, p_R_camera ? &o.tree : nullptr, p_R_camera, candidate.X_RT, impl_->score_samples,
+                 candidate.fit_error, candidate.unexplained);
+    candidate.score = candidate.fit_error + options.unexplained_weight * candidate.unexplained;
+  };
+  // Screening: a few iterations tell the hopeless initial guesses (most of the 8) from the
+  // promising ones, which alone get the rest of the coarse iterations.
+  const bool screen = options.screen_iterations > 0 && options.screen_iterations < options.coarse_iterations &&
+                      static_cast<int>(turns.size()) > options.screen_keep;
   for (const auto& [label, turn] : turns) {
     FitCandidate candidate;
     candidate.label = label;
@@ -370,23 +537,83 @@ ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
     candidate.X_RT_initial.linear() = seen.axes * turn * model.axes.transpose();
     candidate.X_RT_initial.translation() = seen.centroid - candidate.X_RT_initial.linear() * model.centroid;
     const Eigen::Isometry3d X_TR =
-        impl_->RunIcp(coarse_source, candidate.X_RT_initial.inverse(), options.coarse_iterations, candidate.converged);
+        impl_->RunIcp(o.coarse_source, candidate.X_RT_initial.inverse(),
+                      screen ? options.screen_iterations : options.coarse_iterations, true, candidate.converged);
     candidate.X_RT = X_TR.inverse();
-    impl_->Score(coarse, p_R_camera ? &observed_tree : nullptr, p_R_camera, candidate.X_RT, candidate.fit_error,
-                 candidate.unexplained);
-    candidate.score = candidate.fit_error + options.unexplained_weight * candidate.unexplained;
-    if (candidate.score < best_score) {
-      best_score = candidate.score;
-      result.best_candidate = static_cast<int>(result.candidates.size());
-    }
+    score(candidate);
     result.candidates.push_back(std::move(candidate));
   }
+  if (screen) {
+    std::vector<std::size_t> order(result.candidates.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return result.candidates[a].score < result.candidates[b].score;
+    });
+    for (int k = 0; k < options.screen_keep; ++k) {
+      FitCandidate& candidate = result.candidates[order[static_cast<std::size_t>(k)]];
+      candidate.X_RT = impl_->RunIcp(o.coarse_source, candidate.X_RT.inverse(),
+                                     options.coarse_iterations - options.screen_iterations, true, candidate.converged)
+                           .inverse();
+      score(candidate);
+    }
+  }
+  double best_score = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < result.candidates.size(); ++k) {
+    if (result.candidates[k].score < best_score) {
+      best_score = result.candidates[k].score;
+      result.best_candidate = static_cast<int>(k);
+    }
+  }
   TOOLBENCH_DEMAND(result.best_candidate >= 0);
-
   const FitCandidate& best = result.candidates[static_cast<std::size_t>(result.best_candidate)];
   result.X_RT = best.X_RT;
+  result.fit_error = best.fit_error;
+  result.unexplained = best.unexplained;
+  result.score = best.score;
+  result.converged = best.converged;
+  result.iterations = options.coarse_iterations;
+  result.status = FitStatus::kOk;
+  return result;
+}
+
+ModelFitResult ModelFitter::Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                                   ModelFitResult searched) const {
+  return RefineWith(p_R, p_R_camera, std::move(searched), impl_->options.max_observed_points,
+                    impl_->options.max_iterations, false);
+}
+
+ModelFitResult ModelFitter::Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                                   ModelFitResult searched, int max_observed_points, int max_iterations) const {
+  return RefineWith(p_R, p_R_camera, std::move(searched), max_observed_points, max_iterations, true);
+}
+
+ModelFitResult ModelFitter::RefineWith(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                                       ModelFitResult searched, int max_observed_points, int max_iterations,
+                                       bool own_loop) const {
+  RequireFinite(p_R, "ModelFitter::Refine");
+  if (max_observed_points < kMinFitPoints) {
+    ThrowInvalid("ModelFitter::Refine: argument max_observed_points = ", max_observed_points, " (expected >= ",
+                 kMinFitPoints, ")");
+  }
+  if (max_iterations <= 0) {
+    ThrowInvalid("ModelFitter::Refine: argument max_iterations = ", max_iterations, " (expected > 0)");
+  }
+  if (searched.status != FitStatus::kOk || searched.model != impl_->name || searched.best_candidate < 0 ||
+      searched.best_candidate >= static_cast<int>(searched.candidates.size())) {
+    ThrowInvalid("ModelFitter::Refine: argument searched (model '", searched.model,
+                 "') is not a successful Search result of this fitter (model '", impl_->name, "')");
+  }
+  if (p_R.cols() < kMinFitPoints) {
+    ThrowInvalid("ModelFitter::Refine: argument p_R has ", p_R.cols(), " points (expected >= ", kMinFitPoints, ")");
+  }
+  const ModelFitOptions& options = impl_->options;
+  Impl::Observation o;
+  impl_->Observe(p_R, p_R_camera.has_value(), max_observed_points, o);
+  ModelFitResult result = std::move(searched);
+  const FitCandidate& best = result.candidates[static_cast<std::size_t>(result.best_candidate)];
   if (!p_R_camera || options.visible_rounds == 0) {
-    result.X_RT = impl_->RunIcp(source, best.X_RT.inverse(), options.max_iterations, result.converged).inverse();
+    result.X_RT =
+        impl_->RunIcp(o.source, result.X_RT.inverse(), max_iterations, own_loop, result.converged).inverse();
   }
   // With the camera known, only the camera-facing model surface can have produced the points.
   // Matching against both faces lets a thin blade's far face pull the fit by its thickness,
@@ -408,12 +635,13 @@ ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
     const Cloud::Ptr visible_model = ToPcl(points, &normals);
     auto visible_tree = std::make_shared<pcl::search::KdTree<Point>>();
     visible_tree->setInputCloud(visible_model);
-    result.X_RT = impl_->RunIcpOn(visible_model, visible_tree, source, result.X_RT.inverse(), options.max_iterations,
-                                  result.converged)
-                      .inverse();
+    result.X_RT =
+        impl_->RunIcpOn(visible_model, visible_tree, o.source, result.X_RT.inverse(), max_iterations, own_loop,
+                        result.converged)
+            .inverse();
   }
-  result.iterations = options.max_iterations;
-  impl_->Score(observed, p_R_camera ? &observed_tree : nullptr, p_R_camera, result.X_RT, result.fit_error,
+  result.iterations = max_iterations;
+  impl_->Score(o.observed, p_R_camera ? &o.tree : nullptr, p_R_camera, result.X_RT, impl_->samples, result.fit_error,
                result.unexplained);
   result.score = result.fit_error + options.unexplained_weight * result.unexplained;
   result.status = FitStatus::kOk;
@@ -424,8 +652,7 @@ ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
 
 struct ToolRecognizer::Impl {
   RecognitionOptions options;
-  std::vector<ModelFitter> fitters;   // full options
-  std::vector<ModelFitter> rankers;   // same samples, short ICP
+  std::vector<ModelFitter> fitters;
 };
 
 ToolRecognizer::ToolRecognizer(const std::vector<toollib::ToolModel>& library, const RecognitionOptions& options)
@@ -434,12 +661,7 @@ ToolRecognizer::ToolRecognizer(const std::vector<toollib::ToolModel>& library, c
   if (library.empty()) ThrowInvalid("ToolRecognizer: argument library is empty (expected >= 1 model)");
   impl_->options = options;
   impl_->fitters.reserve(library.size());
-  ModelFitOptions ranking = options.fit;
-  ranking.max_iterations = options.ranking_iterations;
-  for (const toollib::ToolModel& model : library) {
-    impl_->fitters.emplace_back(model, options.fit);
-    impl_->rankers.emplace_back(model, ranking);
-  }
+  for (const toollib::ToolModel& model : library) impl_->fitters.emplace_back(model, options.fit);
 }
 
 ToolRecognizer::~ToolRecognizer() = default;
@@ -453,22 +675,42 @@ const ModelFitter& ToolRecognizer::fitter(int index) const {
   return impl_->fitters[static_cast<std::size_t>(index)];
 }
 
+std::vector<std::string> ToolRecognizer::model_names() const {
+  std::vector<std::string> names;
+  for (const ModelFitter& f : impl_->fitters) names.push_back(f.name());
+  return names;
+}
+
 RecognitionResult ToolRecognizer::Recognize(const Eigen::Matrix3Xf& p_R,
-                                            const std::optional<Eigen::Vector3d>& p_R_camera) const {
+                                            const std::optional<Eigen::Vector3d>& p_R_camera,
+                                            const std::vector<double>& prior) const {
   RequireFinite(p_R, "ToolRecognizer::Recognize");
+  const std::size_t n = impl_->fitters.size();
+  const RecognitionOptions& options = impl_->options;
+  if (!prior.empty()) {
+    if (prior.size() != n) {
+      ThrowInvalid("ToolRecognizer::Recognize: argument prior has ", prior.size(), " entries (expected one per ",
+                   "library model, ", n, ")");
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!(prior[i] >= 0.0) || !std::isfinite(prior[i])) {
+        ThrowInvalid("ToolRecognizer::Recognize: argument prior[", i, "] = ", prior[i], " (expected >= 0)");
+      }
+    }
+  }
   RecognitionResult result;
   if (p_R.cols() < kMinFitPoints) {
     result.reason = Cat("observed cloud has ", p_R.cols(), " points (need >= ", kMinFitPoints, ")");
     return result;
   }
   const Eigen::Vector3d seen = PrincipalExtents(p_R);
-  const std::size_t n = impl_->fitters.size();
   result.scores.resize(n);
   std::vector<std::size_t> order(n);
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector3d& model = impl_->fitters[i].principal_extents();
     ModelScore& s = result.scores[i];
     s.model = impl_->fitters[i].name();
+    s.prior = prior.empty() ? 0.0 : prior[i];
     // Occlusion can shorten the observed length, so a shorter observation costs half as much as
     // a longer one. The width depends on the view (a blade seen edge-on looks thin), so it
     // counts a quarter.
@@ -477,32 +719,88 @@ RecognitionResult ToolRecognizer::Recognize(const Eigen::Matrix3Xf& p_R,
     s.extent_distance = (length_ratio > 0 ? 2.0 : 1.0) * std::abs(length_ratio) + 0.25 * std::abs(width_ratio);
     order[i] = i;
   }
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    return result.scores[a].extent_distance < result.scores[b].extent_distance;
-  });
-  const std::size_t fitted = std::min<std::size_t>(n, static_cast<std::size_t>(impl_->options.max_models));
+  std::size_t candidates = 0;
+  if (prior.empty()) {
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return result.scores[a].extent_distance < result.scores[b].extent_distance;
+    });
+    candidates = std::min<std::size_t>(n, static_cast<std::size_t>(options.max_models));
+  } else {
+    // The classifier's most probable models, until they hold classifier_mass of the probability.
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return prior[a] > prior[b]; });
+    double total = 0.0;
+    for (double p : prior) total += p;
+    double mass = 0.0;
+    while (candidates < std::min<std::size_t>(n, static_cast<std::size_t>(options.max_classifier_candidates))) {
+      // A few stray tree votes (1-3 of 100) are noise, not a hypothesis worth a fit.
+      if (candidates > 0 && prior[order[candidates]] < options.min_classifier_probability * total) break;
+      mass += prior[order[candidates]];
+      ++candidates;
+      if (mass >= options.classifier_mass * total) break;
+    }
+  }
+
+  // Verification: each candidate's pose search and a light refinement score how well the model
+  // explains the cloud (the coarse search alone confuses a rake with a hoe); the winner alone
+  // gets the full refinement, from where its verification left it.
+  std::vector<ModelFitResult> searched(n);
   double best_score = std::numeric_limits<double>::infinity();
-  std::size_t best = order[0];
-  for (std::size_t k = 0; k < fitted; ++k) {
+  const auto search_start = std::chrono::steady_clock::now();
+  double search_ms = 0.0;  // of which the pose searches
+  for (std::size_t k = 0; k < candidates; ++k) {
     const std::size_t i = order[k];
+    const auto t0 = std::chrono::steady_clock::now();
+    ModelFitResult search = impl_->fitters[i].Search(p_R, p_R_camera);
+    search_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    searched[i] = impl_->fitters[i].Refine(p_R, p_R_camera, std::move(search), options.verify_points,
+                                           options.verify_iterations);
     ModelScore& s = result.scores[i];
     s.fitted = true;
-    s.score = impl_->rankers[i].Fit(p_R, p_R_camera).score;
-    if (s.score < best_score) {
-      best_score = s.score;
+    s.score = searched[i].score;
+    best_score = std::min(best_score, s.score);
+  }
+  // Combined evidence: prior (1 without a classifier) times a fit likelihood
+  // exp(-(score - best) / confidence_scale), normalised over the verified models.
+  double normaliser = 0.0;
+  std::size_t best = order[0];
+  double best_weight = -1.0;
+  for (std::size_t k = 0; k < candidates; ++k) {
+    const std::size_t i = order[k];
+    const double weight = (prior.empty() ? 1.0 : prior[i]) *
+                          std::exp(-(result.scores[i].score - best_score) / options.confidence_scale);
+    result.scores[i].posterior = weight;
+    normaliser += weight;
+    if (weight > best_weight) {
+      best_weight = weight;
       best = i;
     }
   }
-  result.fit = impl_->fitters[best].Fit(p_R, p_R_camera);
-  double normaliser = 0.0;
-  for (const ModelScore& s : result.scores) {
-    if (s.fitted) normaliser += std::exp(-(s.score - best_score) / impl_->options.confidence_scale);
+  double verified_mass = 1.0;
+  if (!prior.empty()) {
+    double total = 0.0;
+    double covered = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      total += prior[i];
+      if (result.scores[i].fitted) covered += prior[i];
+    }
+    verified_mass = total > 0 ? covered / total : 0.0;
   }
+  for (ModelScore& s : result.scores) {
+    if (s.fitted) s.posterior = normaliser > 0 ? s.posterior / normaliser : 0.0;
+  }
+  const auto refine_start = std::chrono::steady_clock::now();
+  result.fit = impl_->fitters[best].Refine(p_R, p_R_camera, std::move(searched[best]));
+  const auto refine_end = std::chrono::steady_clock::now();
   result.status = FitStatus::kOk;
   result.model = result.fit.model;
-  result.confidence = 1.0 / normaliser;
-  internal::Logger()->debug("recognised {} (confidence {:.2f}, score {:.4f} m)", result.model, result.confidence,
-                            best_score);
+  // Unverified models keep their classifier probability: it is mass the winner cannot claim.
+  result.confidence = result.scores[best].posterior * verified_mass;
+  internal::Logger()->debug(
+      "recognised {} (confidence {:.2f}, score {:.4f} m): {} candidates verified in {:.1f} ms (searches {:.1f} ms), "
+      "refined in {:.1f} ms",
+      result.model, result.confidence, result.scores[best].score, candidates,
+      std::chrono::duration<double, std::milli>(refine_start - search_start).count(), search_ms,
+      std::chrono::duration<double, std::milli>(refine_end - refine_start).count());
   return result;
 }
 

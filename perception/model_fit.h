@@ -32,8 +32,10 @@ SurfaceSamples SampleSurface(const toollib::TriangleMesh& mesh, int count, std::
 /// Error metric ICP minimises.
 enum class IcpMetric {
   kPointToPoint,  // pcl::IterativeClosestPoint, the thesis's baseline
-  kPointToPlane,  // pcl::IterativeClosestPoint with a damped point-to-plane step (model normals
-                  // from the mesh faces): slides along the handle far better than point-to-point
+  kPointToPlane,  // damped point-to-plane steps (model normals from the mesh faces): slides along
+                  // the handle far better than point-to-point. The candidate search and the
+                  // light verification run our own ICP loop (2-3x faster than PCL's), the final
+                  // refinement pcl::IterativeClosestPoint
 };
 
 /// Configuration of the model-to-cloud fit. The ICP stopping criteria are the thesis's
@@ -53,13 +55,24 @@ struct ModelFitOptions {
   double max_correspondence_distance = 0.05;  // ICP pairs farther apart are ignored [m], > 0
   int coarse_points = 300;                 // observed points used to rank the candidates, >= 10
   int coarse_iterations = 40;              // ICP cap for scoring each initial candidate, > 0
+  int screen_iterations = 10;              // > 0: every candidate first gets this many ICP
+                                           // iterations and is scored; only the screen_keep best
+                                           // continue to coarse_iterations. 0 = no screening
+                                           // (every candidate runs coarse_iterations), >= 0
+  int screen_keep = 3;                     // candidates kept by the screening, > 0
   bool try_flips = true;                   // false: only the principal-axes alignment (no flips)
+  int spin_steps = 4;                      // with try_flips: turns about the main axis tried, every
+                                           // 360 / spin_steps deg, for each direction of the main
+                                           // axis (2 * spin_steps candidates), in [1, 36]
   int visible_rounds = 2;                  // with a camera: refinements against the camera-facing
                                            // model samples only (re-selected each round), >= 0
   double visible_distance = 0.01;          // a visible model point farther than this from every
                                            // observed point counts as unexplained [m], > 0
   double unexplained_weight = 0.02;        // score = fit_error + weight * unexplained fraction
                                            // [m per unit fraction], >= 0
+  int score_model_points = 1000;           // model samples (an even subset of model_points) whose
+                                           // visibility scores each candidate of the search; the
+                                           // final score uses all of them, >= 10
   void Validate() const;                   // throws std::invalid_argument naming the field
 };
 
@@ -74,10 +87,10 @@ inline constexpr int kMinFitPoints = 10;
 
 /// One initial guess tried by the fit and where ICP took it.
 struct FitCandidate {
-  std::string label;  // "main_<a>": principal axes aligned, then turned by <a> = 0/90/180/270
-                      // deg about the main axis; "rev_<a>": the same after 180 deg about the
-                      // second axis (main axis reversed). main_180 and rev_0/rev_180 are the
-                      // 180-degree flips about each principal axis.
+  std::string label;  // "main_<a>": principal axes aligned, then turned by <a> deg about the
+                      // main axis (a = k * 360 / spin_steps: 0/90/180/270 by default); "rev_<a>":
+                      // the same after 180 deg about the second axis (main axis reversed).
+                      // main_180 and rev_0/rev_180 are the 180-degree flips about each axis.
   Eigen::Isometry3d X_RT_initial = Eigen::Isometry3d::Identity();  // guess, tool in root R
   Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();          // after the coarse ICP
   double fit_error = 0.0;     // mean observed-to-model distance after the coarse ICP [m]
@@ -129,6 +142,27 @@ class ModelFitter {
   ModelFitResult Fit(const Eigen::Matrix3Xf& p_R,
                      const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
 
+  /// The first stage of Fit alone: every initial candidate with the short ICP (coarse_points,
+  /// coarse_iterations; screened first when screen_iterations > 0), scored. X_RT, fit_error,
+  /// unexplained and score are the best candidate's; iterations = coarse_iterations.
+  /// Same arguments, results and exceptions as Fit.
+  ModelFitResult Search(const Eigen::Matrix3Xf& p_R,
+                        const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
+
+  /// The second stage of Fit: the full ICP (and visible-surface rounds) from the pose X_RT of
+  /// `searched`, which must be a kOk Search (or Refine) result of this fitter on the same `p_R`
+  /// and `p_R_camera`. Fit(p, c) == Refine(p, c, Search(p, c)). Throws std::invalid_argument for
+  /// a `searched` of another model or not kOk, fewer than kMinFitPoints or non-finite points.
+  ModelFitResult Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                        ModelFitResult searched) const;
+
+  /// Refine with other limits than the options': at most `max_observed_points` (>= 10) observed
+  /// points and `max_iterations` (> 0) ICP iterations per round (ToolRecognizer verifies
+  /// candidate models with a light refinement). Throws std::invalid_argument also for limits
+  /// out of range.
+  ModelFitResult Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                        ModelFitResult searched, int max_observed_points, int max_iterations) const;
+
   /// The model samples in T (for display and tests).
   const SurfaceSamples& samples() const;
   /// The library model name.
@@ -137,17 +171,30 @@ class ModelFitter {
   const Eigen::Vector3d& principal_extents() const;
 
  private:
+  // The Refine overloads: own_loop selects our ICP loop (verification) or PCL's (final fit).
+  ModelFitResult RefineWith(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                            ModelFitResult searched, int max_observed_points, int max_iterations,
+                            bool own_loop) const;
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
 
-/// Options of RecognizeTool.
+/// Options of ToolRecognizer.
 struct RecognitionOptions {
   ModelFitOptions fit;        // used for every model
-  int max_models = 6;         // models fitted after the cheap pre-selection, > 0
-  int ranking_iterations = 60;  // ICP cap (per round) of the fits that rank those models; the
-                                // winner is refitted with fit.max_iterations, > 0
-  double confidence_scale = 0.002;  // softmax temperature on the scores [m], > 0
+  int max_models = 6;         // without a classifier prior: models verified after the extent
+                              // pre-selection, > 0
+  int max_classifier_candidates = 3;  // with a prior: at most this many models verified, > 0
+  int verify_points = 500;    // observed points of the light refinement that verifies each
+                              // candidate model after its pose search, >= 10
+  int verify_iterations = 30;  // ICP cap per round of that refinement, > 0
+  double classifier_mass = 0.95;      // with a prior: models are verified in decreasing
+                                      // probability until they hold this much of it, (0, 1]
+  double min_classifier_probability = 0.05;  // with a prior: a model less probable than this
+                                             // is not verified (the most probable one always
+                                             // is), [0, 1)
+  double confidence_scale = 0.002;  // temperature of the fit likelihood exp(-score / scale) [m], > 0
   void Validate() const;      // throws std::invalid_argument naming the field
 };
 
@@ -155,8 +202,11 @@ struct RecognitionOptions {
 struct ModelScore {
   std::string model;           // library model name
   double extent_distance = 0;  // cheap pre-selection distance (relative extent mismatch)
-  bool fitted = false;         // false when the pre-selection dropped it
-  double score = 0;            // ModelFitResult::score of the ranking fit when fitted [m]
+  double prior = 0;            // classifier probability; 0 without a classifier
+  bool fitted = false;         // verified (pose search run); false when not selected
+  double score = 0;            // score after the verifying refinement when fitted [m]
+  double posterior = 0;        // prior (1 without one) x fit likelihood, normalised over the
+                               // verified models; 0 when not fitted
 };
 
 /// Best library model for one observed cloud.
@@ -164,17 +214,21 @@ struct RecognitionResult {
   FitStatus status = FitStatus::kTooFewPoints;
   std::string reason;        // empty when kOk
   std::string model;         // best model's name
-  double confidence = 0.0;   // softmax of -score / confidence_scale over the fitted models, (0, 1]
+  double confidence = 0.0;   // the winner's posterior (see ModelScore) times the prior mass of the
+                             // verified models (1 without a prior), (0, 1]
   ModelFitResult fit;        // the best model's full fit
   std::vector<ModelScore> scores;  // every library model, in library order
 };
 
-/// Recognises a tool by fitting library models (a baseline; a learned classifier comes later).
-/// Colour-free: the models are pre-selected by how well the principal extents of the observed
-/// cloud match theirs (observed length may be shorter than the model's when occluded, never
-/// much longer), the `max_models` best are fitted with a short ICP (ranking_iterations) and
-/// the lowest score wins; the winner is then refitted with the full options. Construction
-/// samples every model once.
+/// Recognises a tool among the library models and fits the winner. Colour-free.
+/// Candidates: with a classifier prior (ToolClassifier::PredictForLibrary), the most probable
+/// models until they hold `classifier_mass` of the probability, at most
+/// `max_classifier_candidates`, none below `min_classifier_probability` but the first; without one (the fallback), the `max_models` models whose
+/// principal extents best match the cloud's (observed length may be shorter than the model's
+/// when occluded, never much longer). Verification: each candidate's pose search
+/// (ModelFitter::Search) and a light refinement (verify_points, verify_iterations) score it;
+/// the winner maximises prior x exp(-score / confidence_scale) and alone gets the full
+/// refinement (ModelFitter::Refine). Construction samples every model once.
 class ToolRecognizer {
  public:
   /// Throws std::invalid_argument for bad options, an empty library, or a model that cannot be
@@ -186,8 +240,14 @@ class ToolRecognizer {
 
   /// See the class comment; arguments as ModelFitter::Fit. Returns kTooFewPoints with a reason
   /// for a cloud too small to fit; throws std::invalid_argument for non-finite points.
+  /// `prior`, when not empty, is a probability per library model (library order, >= 0).
+  /// Throws std::invalid_argument also for a prior of the wrong length or a negative entry.
   RecognitionResult Recognize(const Eigen::Matrix3Xf& p_R,
-                              const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
+                              const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt,
+                              const std::vector<double>& prior = {}) const;
+
+  /// The library model names, in library order (the order a prior must follow).
+  std::vector<std::string> model_names() const;
 
   /// The fitter of library model `index` (library order).
   const ModelFitter& fitter(int index) const;

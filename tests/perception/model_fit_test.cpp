@@ -162,6 +162,27 @@ TEST_F(ModelFitTest, FitIsDeterministic) {
   EXPECT_EQ(a.fit_error, b.fit_error);
 }
 
+TEST_F(ModelFitTest, FitIsSearchThenRefine) {
+  const Eigen::Vector3d camera(0.1, 0.0, 0.4);
+  const Eigen::Matrix3Xf view = PartialView(*hoe_, BasePose(), camera, 5);
+  const ModelFitResult search = fitter_->Search(view, camera);
+  ASSERT_EQ(search.status, FitStatus::kOk);
+  EXPECT_EQ(search.candidates.size(), 8u);
+  EXPECT_EQ(search.X_RT.matrix(), search.candidates[static_cast<std::size_t>(search.best_candidate)].X_RT.matrix());
+  const ModelFitResult refined = fitter_->Refine(view, camera, search);
+  const ModelFitResult fit = fitter_->Fit(view, camera);
+  EXPECT_TRUE(refined.X_RT.matrix() == fit.X_RT.matrix());
+  EXPECT_EQ(refined.score, fit.score);
+  // The refinement does not make the fit worse than the search left it.
+  EXPECT_LE(refined.fit_error, search.fit_error + 1e-4);
+  ModelFitResult other = search;
+  other.model = "rake_1";
+  EXPECT_THAT([&] { fitter_->Refine(view, camera, other); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("'rake_1'")));
+  EXPECT_THAT([&] { fitter_->Refine(view, camera, search, 5, 10); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("max_observed_points = 5")));
+}
+
 TEST_F(ModelFitTest, BadInput) {
   const ModelFitResult three = fitter_->Fit(Eigen::Matrix3Xf::Ones(3, 3));
   EXPECT_EQ(three.status, FitStatus::kTooFewPoints);
@@ -173,6 +194,14 @@ TEST_F(ModelFitTest, BadInput) {
   options.max_iterations = 0;
   EXPECT_THAT([&] { ModelFitter(*hoe_, options); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("max_iterations = 0")));
+  options = ModelFitOptions{};
+  options.spin_steps = 0;
+  EXPECT_THAT([&] { ModelFitter(*hoe_, options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("spin_steps = 0")));
+  RecognitionOptions recognition;
+  recognition.classifier_mass = 1.5;
+  EXPECT_THAT([&] { recognition.Validate(); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("classifier_mass = 1.5")));
 }
 
 TEST(ToolRecognizerTest, PicksTheObservedModel) {
@@ -192,6 +221,31 @@ TEST(ToolRecognizerTest, PicksTheObservedModel) {
     EXPECT_EQ(r.scores.size(), library.size());
   }
   EXPECT_EQ(recognizer.Recognize(Eigen::Matrix3Xf::Zero(3, 2)).status, FitStatus::kTooFewPoints);
+
+  // With a classifier prior: only the likely models are verified, the probability combines.
+  const Eigen::Matrix3Xf rake_view = PartialView(library[1], BasePose(), camera, 9);
+  const RecognitionResult sure = recognizer.Recognize(rake_view, camera, {0.02, 0.97, 0.01});
+  ASSERT_EQ(sure.status, FitStatus::kOk) << sure.reason;
+  EXPECT_EQ(sure.model, "rake_1");
+  EXPECT_FALSE(sure.scores[0].fitted);
+  EXPECT_TRUE(sure.scores[1].fitted);
+  EXPECT_NEAR(sure.confidence, 0.97, 1e-9);  // one verified model holding 97 % of the prior
+  // Below classifier_mass, but the rest are stray votes under min_classifier_probability.
+  const RecognitionResult stray = recognizer.Recognize(rake_view, camera, {0.04, 0.92, 0.04});
+  EXPECT_FALSE(stray.scores[0].fitted);
+  EXPECT_FALSE(stray.scores[2].fitted);
+  EXPECT_EQ(stray.model, "rake_1");
+  // Two close candidates: both verified, the fit decides against the (wrong) favourite.
+  const RecognitionResult close = recognizer.Recognize(rake_view, camera, {0.55, 0.44, 0.01});
+  EXPECT_TRUE(close.scores[0].fitted);
+  EXPECT_TRUE(close.scores[1].fitted);
+  EXPECT_FALSE(close.scores[2].fitted);
+  EXPECT_EQ(close.model, "rake_1");
+  EXPECT_THAT([&] { recognizer.Recognize(rake_view, camera, {0.5, 0.5}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("prior has 2 entries")));
+  EXPECT_THAT([&] { recognizer.Recognize(rake_view, camera, {0.5, -0.1, 0.6}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("prior[1] = -0.1")));
+  EXPECT_EQ(recognizer.model_names(), (std::vector<std::string>{"hoe_2", "rake_1", "hook_3"}));
 }
 
 }  // namespace

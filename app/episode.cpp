@@ -1,0 +1,475 @@
+#include "app/episode.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <spdlog/spdlog.h>
+
+#include "app/bench.h"
+#include "app/frame_io.h"
+#include "common/check.h"
+#include "common/paths.h"
+#include "common/rng.h"
+#include "control/skills.h"
+#include "perception/analysis.h"
+#include "perception/ball.h"
+#include "sim/renderer.h"
+#include "sim/world.h"
+
+namespace toolbench::app {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Ms(Clock::time_point since) { return std::chrono::duration<double, std::milli>(Clock::now() - since).count(); }
+
+nlohmann::json Vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+/// The robot as control sees it, filming the scene from the overview camera while time passes
+/// (--video). Frames are rendered every 1/fps of robot time; nothing else changes.
+class FilmingRobot : public RobotInterface {
+ public:
+  FilmingRobot(sim::World& world, sim::SimRobot& robot) : world_(world), robot_(robot) {}
+
+  void StartFilming(sim::GlContext& gl, const std::filesystem::path& file, double fps) {
+    sim::RendererOptions options;
+    options.camera = "overview";
+    options.noise.enabled = false;
+    renderer_ = std::make_unique<sim::Renderer>(gl, world_, options);
+    const CameraIntrinsics& K = renderer_->intrinsics();
+    writer_.open(file.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps, cv::Size(K.width, K.height));
+    if (!writer_.isOpened()) ThrowInvalid("episode --video: cannot open '", file.string(), "' for writing (mp4v)");
+    period_ = 1.0 / fps;
+    next_frame_ = world_.time();
+  }
+
+  std::vector<std::string> JointNames() const override { return robot_.JointNames(); }
+  Eigen::VectorXd ReadEncoders() const override { return robot_.ReadEncoders(); }
+  Eigen::VectorXd ReadVelocities() const override { return robot_.ReadVelocities(); }
+  void SetPositionTargets(const Eigen::VectorXd& q) override { robot_.SetPositionTargets(q); }
+  Eigen::VectorXd PositionTargets() const override { return robot_.PositionTargets(); }
+  double Time() const override { return robot_.Time(); }
+  void Wait(double seconds) override {
+    if (renderer_ == nullptr) {
+      robot_.Wait(seconds);
+      return;
+    }
+    const double end = world_.time() + seconds;
+    while (world_.time() < end - 1e-9) {
+      if (world_.time() >= next_frame_ - 1e-9) {
+        const RgbdFrame frame = renderer_->Render(world_, 0);
+        cv::Mat bgr;
+        cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
+        writer_.write(bgr);
+        next_frame_ += period_;
+      }
+      robot_.Wait(std::min(end, next_frame_) - world_.time());
+    }
+  }
+
+ private:
+  sim::World& world_;
+  sim::SimRobot& robot_;
+  std::unique_ptr<sim::Renderer> renderer_;
+  cv::VideoWriter writer_;
+  double period_ = 0.04;
+  double next_frame_ = 0.0;
+};
+
+/// Prints one progress line per stage on a terminal (or always, unless quiet).
+void Progress(const EpisodeRequest& request, int index, const StageRecord& stage) {
+  if (request.quiet) return;
+  std::fprintf(stdout, "[%d] %-16s %-4s %-12s %6.0f ms  %5.1f s robot%s%s\n", index, stage.name.c_str(),
+               stage.ok ? "ok" : "FAIL", stage.outcome.c_str(), stage.wall_ms, stage.robot_s,
+               stage.reason.empty() ? "" : "  ", stage.reason.c_str());
+  std::fflush(stdout);
+}
+
+/// Expected ball displacement toward the robot of a pull with this tool (interim, geometric):
+/// a tool whose effector protrudes sideways by at least a third of the ball's radius can hook
+/// the ball and bring it the whole planned drag; a straight tool only pushes it aside. Longer
+/// tools reach further behind the ball, so they win ties. The learned model of `toolbench
+/// explore` replaces this (issue 5).
+double PredictPull(const perception::ToolFeatures& f, double ball_radius, double drag_m) {
+  const double hook = std::clamp(f.effector_protrusion / (ball_radius / 3.0), 0.0, 1.0);
+  return drag_m * (0.1 + 0.9 * hook) + 0.01 * f.total_length;
+}
+
+/// Draws the perceived tools and their handles on the rack view.
+cv::Mat DrawAnalysis(const RgbdFrame& frame, const perception::FrameAnalysis& analysis, int chosen) {
+  cv::Mat bgr;
+  cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
+  const Eigen::Isometry3d X_CR = frame.X_RC.inverse();
+  auto project = [&](const Eigen::Vector3d& p_R) {
+    const Eigen::Vector3d p = X_CR * p_R;
+    const CameraIntrinsics& K = frame.intrinsics;
+    return cv::Point2d(K.fx * p.x() / p.z() + K.cx, K.fy * p.y() / p.z() + K.cy);
+  };
+  for (size_t i = 0; i < analysis.segments.size(); ++i) {
+    const perception::ToolAnalysis& tool = analysis.tools[i];
+    const cv::Scalar colour = static_cast<int>(i) == chosen ? cv::Scalar(0, 255, 0) : cv::Scalar(0, 200, 255);
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(analysis.segments[i].mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+    cv::drawContours(bgr, contours, -1, colour, static_cast<int>(i) == chosen ? 3 : 1);
+    std::string label = std::to_string(i) + " " + (tool.model.empty() ? "?" : tool.model);
+    if (tool.status == perception::AnalysisStatus::kOk) {
+      const Eigen::Vector3d half = tool.handle.axis * tool.handle.length / 2;
+      cv::line(bgr, project(tool.handle.center - half), project(tool.handle.center + half), cv::Scalar(255, 0, 255),
+               3);
+      cv::circle(bgr, project(tool.handle.center), 5, cv::Scalar(255, 0, 255), -1);
+      label += fmt::format(" {:.0f}%", 100 * tool.confidence);
+    }
+    cv::putText(bgr, label, analysis.segments[i].roi.tl() + cv::Point(0, -5), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                cv::Scalar(0, 0, 0), 3);
+    cv::putText(bgr, label, analysis.segments[i].roi.tl() + cv::Point(0, -5), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                cv::Scalar(255, 255, 255), 1);
+  }
+  return bgr;
+}
+
+cv::Mat DrawBall(const RgbdFrame& frame, const perception::BallDetection& ball) {
+  cv::Mat bgr;
+  cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
+  if (ball.status == perception::BallStatus::kFound) {
+    cv::rectangle(bgr, ball.roi, cv::Scalar(0, 255, 0), 2);
+    cv::putText(bgr, fmt::format("ball r {:.0f} mm", ball.radius * 1000), ball.roi.tl() + cv::Point(0, -5),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 255, 0), 1);
+  }
+  return bgr;
+}
+
+/// Handle frame of the palm's grasp cylinder, in the palm frame P (desc.grasp).
+Eigen::Isometry3d PalmHandleFrame(const robot::RobotDescription& desc) {
+  Eigen::Isometry3d X_PH = Eigen::Isometry3d::Identity();
+  X_PH.linear() =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
+  X_PH.translation() = desc.grasp.center;
+  return X_PH;
+}
+
+}  // namespace
+
+EpisodeResult RunEpisode(const EpisodeRequest& request) {
+  if (request.action != "pull") {
+    ThrowInvalid("episode: action '", request.action, "' is not implemented (implemented: pull)");
+  }
+  const auto episode_start = Clock::now();
+  EpisodeResult result;
+  result.seed = request.scene.seed;
+  if (!request.out_dir.empty()) std::filesystem::create_directories(request.out_dir);
+
+  // ---- Setup: scene, world, robot, eyes. ----
+  LoadedScene scene = LoadScene(request.scene);
+  if (scene.composed.tools.empty()) ThrowInvalid("episode: the rack is empty (no tool in the scene)");
+  sim::World world(scene.composed.mjcf, "episode seed " + std::to_string(request.scene.seed));
+  sim::SimRobot sim_robot(world);
+  FilmingRobot robot(world, sim_robot);
+  sim::GlContext gl;
+  if (request.video) {
+    if (request.out_dir.empty()) ThrowInvalid("episode --video needs --out");
+    robot.StartFilming(gl, request.out_dir / "video.mp4", 25.0);
+  }
+  const robot::RobotDescription& desc = scene.robot;
+  const sim::SceneSpec& spec = scene.spec;
+  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+  world.SettleFreeBodies(spec.physics.settle_time);
+  const Eigen::Vector3d ball_start_R = X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation();
+
+  sim::RendererOptions eye_options;
+  eye_options.noise.enabled = request.noise;
+  sim::Renderer eye(gl, world, eye_options);
+  int frame_count = 0;
+  auto see = [&]() {
+    RgbdFrame frame = eye.Render(world, DeriveSeed(request.scene.seed, "frame/" + std::to_string(frame_count++)));
+    frame.X_RC = CameraPoseFromEncoders(desc, robot);
+    return frame;
+  };
+  auto q_model = [&]() { return ModelQ(desc, robot.JointNames(), robot.ReadEncoders()); };
+  const Eigen::Vector3d table_target(spec.table.center.x(), spec.table.center.y(), spec.table.top_z);
+
+  // ---- Stage bookkeeping. ----
+  auto run_stage = [&](const std::string& name, const std::function<void(StageRecord&)>& body) -> StageRecord& {
+    StageRecord stage;
+    stage.name = name;
+    const auto start = Clock::now();
+    const double robot_start = robot.Time();
+    try {
+      body(stage);
+    } catch (const std::invalid_argument&) {
+      throw;  // bad input: the caller reports it
+    } catch (const std::exception& e) {
+      stage.ok = false;
+      stage.outcome = "error";
+      stage.reason = e.what();
+    }
+    if (!world.status().ok && stage.ok) {
+      stage.ok = false;
+      stage.outcome = "sim_unstable";
+      stage.reason = world.status().message;
+    }
+    stage.wall_ms = Ms(start);
+    stage.robot_s = robot.Time() - robot_start;
+    result.stages.push_back(stage);
+    Progress(request, static_cast<int>(result.stages.size()), result.stages.back());
+    if (!stage.ok && result.failure.empty()) result.failure = stage.name + ": " + stage.reason;
+    return result.stages.back();
+  };
+  const double ball_radius = spec.ball.radius;
+  auto finish = [&]() {
+    result.truth["ball_start_R"] = Vec3(ball_start_R);
+    result.truth["ball_end_R"] = Vec3(X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation());
+    result.truth["tools"] = nlohmann::json::array();
+    for (const auto& placed : scene.composed.tools) {
+      result.truth["tools"].push_back({{"name", placed.name}, {"cell", placed.cell}, {"body", placed.body}});
+    }
+    result.wall_s = Ms(episode_start) / 1000.0;
+    result.robot_s = robot.Time();
+    if (!request.out_dir.empty()) WriteJson(request.out_dir / "result.json", EpisodeJson(result));
+    return result;
+  };
+
+  // ---- 1. Look at the table and find the ball. ----
+  perception::BallDetection ball;
+  auto observe_table = [&](const std::string& name, const std::string& image) {
+    return run_stage(name, [&](StageRecord& s) {
+      const LookResult look = LookAt(robot, desc, table_target);
+      const RgbdFrame frame = see();
+      ball = perception::DetectBall(frame, {});
+      s.ok = ball.status == perception::BallStatus::kFound;
+      s.outcome = s.ok ? "ball_found" : "no_ball";
+      s.reason = ball.reason;
+      s.details = {{"gaze_converged", look.gaze.converged}, {"ball_R", Vec3(ball.p_RB)}, {"radius_m", ball.radius}};
+      if (!request.out_dir.empty()) cv::imwrite((request.out_dir / image).string(), DrawBall(frame, ball));
+    });
+  };
+  if (!observe_table("observe_table", "table.png").ok) return finish();
+
+  // ---- 2. Is the ball within reach? Then grasp it directly. ----
+  bool reachable = false;
+  run_stage("check_reach", [&](StageRecord& s) {
+    reachable = control::BallInReach(desc, q_model(), ball.p_RB, ball_radius);
+    s.ok = true;
+    s.outcome = reachable ? "reachable" : "out_of_reach";
+  });
+  result.ball_reachable_at_start = reachable;
+
+  auto grasp_ball = [&]() {
+    run_stage("grasp_ball", [&](StageRecord& s) {
+      const double z0 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
+      const control::GraspResult g = control::GraspBall(robot, desc, ball.p_RB, ball_radius);
+      s.ok = g.status == control::GraspStatus::kGrasped;
+      s.outcome = control::ToString(g.status);
+      s.reason = g.reason;
+      const double z1 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
+      result.ball_grasp_success = s.ok && z1 - z0 >= 0.03;
+      s.details = {{"ball_lift_m_truth", z1 - z0}};
+    });
+  };
+
+  if (!reachable) {
+    // ---- 3. Turn to the rack and analyse every tool. ----
+    perception::FrameAnalysis analysis;
+    RgbdFrame rack_frame;
+    std::vector<double> predicted;
+    const perception::ToolAnalyzer analyzer(scene.library, perception::AnalyzerOptions{});
+    const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
+      const LookResult look = LookAt(robot, desc, RackViewTarget(spec));
+      rack_frame = see();
+      analysis = analyzer.Analyze(rack_frame);
+      int ok = 0;
+      s.details["tools"] = nlohmann::json::array();
+      for (size_t i = 0; i < analysis.tools.size(); ++i) {
+        const perception::ToolAnalysis& t = analysis.tools[i];
+        ok += t.status == perception::AnalysisStatus::kOk ? 1 : 0;
+        s.details["tools"].push_back({{"segment", i},
+                                      {"status", perception::ToString(t.status)},
+                                      {"reason", t.reason},
+                                      {"model", t.model},
+                                      {"confidence", t.confidence},
+                                      {"handle_center_R", Vec3(t.handle.center)},
+                                      {"handle_axis_R", Vec3(t.handle.axis)},
+                                      {"ms", analysis.times[i].total_ms}});
+      }
+      s.details["gaze_converged"] = look.gaze.converged;
+      s.ok = ok > 0;
+      s.outcome = fmt::format("{}_of_{}_tools", ok, analysis.tools.size());
+      if (!s.ok) s.reason = analysis.tools.empty() ? "no tool segmented" : analysis.tools.front().reason;
+    });
+    if (!perceived.ok) return finish();
+
+    // ---- 4. Predict each tool's effect and choose. ----
+    const control::PullOptions pull_options;
+    run_stage("choose_tool", [&](StageRecord& s) {
+      double best = -1;
+      for (size_t i = 0; i < analysis.tools.size(); ++i) {
+        const perception::ToolAnalysis& t = analysis.tools[i];
+        const double p = t.status == perception::AnalysisStatus::kOk
+                             ? PredictPull(t.features, ball_radius, pull_options.pull_length_m)
+                             : -1.0;
+        predicted.push_back(p);
+        if (p > best) {
+          best = p;
+          result.chosen_segment = static_cast<int>(i);
+        }
+      }
+      result.chosen_tool = analysis.tools[static_cast<size_t>(result.chosen_segment)].model;
+      result.predicted_displacement_m = best;
+      s.ok = true;
+      s.outcome = result.chosen_tool;
+      s.details = {{"predicted_displacement_m", predicted}, {"method", "geometric (interim)"}};
+    });
+    if (!request.out_dir.empty()) {
+      cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
+    }
+    const perception::ToolAnalysis& tool = analysis.tools[static_cast<size_t>(result.chosen_segment)];
+    const toollib::ToolModel* model = nullptr;
+    for (const auto& m : scene.library) {
+      if (m.name == tool.model) model = &m;
+    }
+    TOOLBENCH_DEMAND(model != nullptr);
+
+    // Which simulated tool the robot went for: for scoring and the hand-over only.
+    std::string tool_body;
+    double nearest = 1e9;
+    for (const auto& placed : scene.composed.tools) {
+      const double d = ((X_RW * world.ground_truth().Pose(placed.body)).translation() - tool.X_RT.translation()).norm();
+      if (d < nearest) {
+        nearest = d;
+        tool_body = placed.body;
+      }
+    }
+    result.truth["chosen_tool_body"] = tool_body;
+
+    // ---- 5. Grasp the handle; hand-over when out of reach. ----
+    Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
+    bool holding = false;
+    run_stage("grasp_tool", [&](StageRecord& s) {
+      const double z0 = world.ground_truth().Pose(tool_body).translation().z();
+      const control::GraspResult g = control::GraspHandle(robot, desc, tool.handle.X_FH);
+      s.outcome = control::ToString(g.status);
+      s.reason = g.reason;
+      if (g.status == control::GraspStatus::kGrasped) {
+        // The tool in the palm as planned: the perceived tool pose seen from the grasp pose.
+        X_PT = g.X_RP_grasp.inverse() * tool.X_RT;
+        holding = true;
+      } else if (g.status == control::GraspStatus::kUnreachable) {
+        // Thesis Fig. 5.20: point at the tool, open the hand, wait; a person puts it in the hand.
+        const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
+        const control::HandOverResult h = control::HandOver(
+            robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
+              world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmHandleFrame(desc) * X_TH.inverse());
+            });
+        result.assisted = true;
+        holding = h.holding;
+        X_PT = PalmHandleFrame(desc) * X_TH.inverse();  // where the person put it
+        s.outcome = "handed_over";
+        s.reason = h.holding ? "out of reach: " + g.reason : h.reason;
+      }
+      s.ok = holding;
+      const double z1 = world.ground_truth().Pose(tool_body).translation().z();
+      result.grasp_success = holding && !result.assisted && z1 - z0 >= 0.05;
+      s.details = {{"tool_lift_m_truth", z1 - z0}, {"assisted", result.assisted}};
+    });
+    if (!holding) return finish();
+
+    // ---- 6. Pull the ball. ----
+    run_stage("pull", [&](StageRecord& s) {
+      control::ToolEffector effector;
+      effector.center_T = model->effector.center;
+      effector.direction_T = Eigen::Vector3d::UnitX();
+      effector.half_thickness_m = std::max(0.003, tool.features.effector_size.x() / 2);
+      const control::PullResult p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius);
+      s.ok = p.status == control::PullStatus::kPulled;
+      s.outcome = control::ToString(p.status);
+      s.reason = p.reason;
+      s.details = {{"planned_drag_m", p.planned_drag_m}};
+    });
+
+    // ---- 7. Put the tool down on the table, away from the ball. ----
+    run_stage("put_down", [&](StageRecord& s) {
+      const double side = ball.p_RB.y() < spec.table.center.y() ? 1.0 : -1.0;
+      const Eigen::Vector3d place(spec.table.center.x(), spec.table.center.y() + side * (spec.table.size.y() / 2 - 0.1),
+                                  spec.table.top_z);
+      const control::PutDownResult d = control::PutDown(robot, desc, X_PT, place, model->handle.radius);
+      s.ok = d.placed;
+      s.outcome = d.placed ? "placed" : "failed";
+      s.reason = d.reason;
+    });
+
+    const Eigen::Vector3d ball_now = X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation();
+    result.achieved_displacement_m = ball_start_R.head<2>().norm() - ball_now.head<2>().norm();
+    result.pull_success = control::BallInReach(desc, q_model(), ball_now, ball_radius);
+
+    // ---- 8. Look again; grasp the ball when it is now in reach. ----
+    if (!observe_table("observe_table_again", "table_after.png").ok) return finish();
+    bool now_reachable = false;
+    run_stage("check_reach_again", [&](StageRecord& s) {
+      now_reachable = control::BallInReach(desc, q_model(), ball.p_RB, ball_radius);
+      s.ok = now_reachable;
+      s.outcome = now_reachable ? "reachable" : "out_of_reach";
+      if (!now_reachable) s.reason = "the ball is still out of reach after the pull";
+    });
+    if (now_reachable) grasp_ball();
+  } else {
+    grasp_ball();
+    result.pull_success = true;  // nothing to pull: the ball was in reach
+  }
+
+  return finish();
+}
+
+nlohmann::json EpisodeJson(const EpisodeResult& r) {
+  nlohmann::json j;
+  j["seed"] = r.seed;
+  j["chosen_tool"] = r.chosen_tool;
+  j["chosen_segment"] = r.chosen_segment;
+  j["ball_reachable_at_start"] = r.ball_reachable_at_start;
+  j["assisted"] = r.assisted;
+  j["grasp_success"] = r.grasp_success;
+  j["pull_success"] = r.pull_success;
+  j["ball_grasp_success"] = r.ball_grasp_success;
+  j["predicted_displacement_m"] = r.predicted_displacement_m;
+  j["achieved_displacement_m"] = r.achieved_displacement_m;
+  j["failure"] = r.failure;
+  j["wall_s"] = r.wall_s;
+  j["robot_s"] = r.robot_s;
+  j["stages"] = nlohmann::json::array();
+  for (const StageRecord& s : r.stages) {
+    j["stages"].push_back({{"name", s.name},
+                           {"ok", s.ok},
+                           {"outcome", s.outcome},
+                           {"reason", s.reason},
+                           {"wall_ms", s.wall_ms},
+                           {"robot_s", s.robot_s},
+                           {"details", s.details}});
+  }
+  j["truth"] = r.truth;
+  return j;
+}
+
+std::string EpisodeSummary(const EpisodeResult& r) {
+  std::ostringstream out;
+  out << fmt::format("episode seed {}: {}\n", r.seed, r.failure.empty() ? "completed" : "stopped at " + r.failure);
+  for (const StageRecord& s : r.stages) {
+    out << fmt::format("  {:<20} {:<4} {:<14} {:7.0f} ms {:6.1f} s robot\n", s.name, s.ok ? "ok" : "FAIL", s.outcome,
+                       s.wall_ms, s.robot_s);
+  }
+  out << fmt::format("  chosen tool {} (predicted {:.2f} m), ball moved {:.2f} m toward the robot\n",
+                     r.chosen_tool.empty() ? "-" : r.chosen_tool, r.predicted_displacement_m,
+                     r.achieved_displacement_m);
+  out << fmt::format("  grasp {}  pull {}  ball grasp {}{}  |  {:.1f} s wall, {:.1f} s robot\n",
+                     r.grasp_success ? "yes" : "no", r.pull_success ? "yes" : "no", r.ball_grasp_success ? "yes" : "no",
+                     r.assisted ? "  (assisted: hand-over)" : "", r.wall_s, r.robot_s);
+  return out.str();
+}
+
+}  // namespace toolbench::app

@@ -1,0 +1,68 @@
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "app/scene_setup.h"
+
+namespace toolbench::app {
+
+/// What `toolbench episode` was asked to do.
+struct EpisodeRequest {
+  SceneRequest scene;               // seed, scene file, tools, cells, user tool folders
+  std::string action = "pull";      // the action on the ball; only "pull" is implemented
+  std::filesystem::path out_dir;    // result.json and images go here (created); empty = no files
+  bool video = false;               // write video.mp4 from the overview camera
+  bool quiet = false;               // no progress lines, no summary on stdout
+  bool noise = true;                // sensor noise model on
+};
+
+/// One stage of the episode (thesis Alg. 6).
+struct StageRecord {
+  std::string name;       // "observe_table", "perceive_tools", "grasp_tool", ...
+  bool ok = false;
+  std::string outcome;    // short status ("found", "grasped", "unreachable", ...)
+  std::string reason;     // why not ok
+  double wall_ms = 0.0;   // wall time of the stage [ms]
+  double robot_s = 0.0;   // robot (simulated) time the stage took [s]
+  nlohmann::json details = nlohmann::json::object();
+};
+
+/// Everything one episode did and achieved. Perception and control decide from sensors only;
+/// the `truth` block and the *_success flags are scored from simulator ground truth afterwards.
+struct EpisodeResult {
+  std::uint64_t seed = 0;
+  std::vector<StageRecord> stages;
+  std::string chosen_tool;          // recognised model of the chosen tool ("" when none)
+  int chosen_segment = -1;
+  bool ball_reachable_at_start = false;  // from perception + IK
+  bool assisted = false;            // a human handed the tool over (hand-over fallback)
+  bool grasp_success = false;       // truth: the chosen tool was lifted off the rack in the hand
+  bool pull_success = false;        // truth: the ball ended within reach
+  bool ball_grasp_success = false;  // truth: the ball was lifted >= 3 cm in the hand
+  double predicted_displacement_m = 0.0;  // what the choice expected the pull to bring [m]
+  double achieved_displacement_m = 0.0;   // truth: ball moved toward the robot [m]
+  std::string failure;              // first failed stage: "<stage>: <reason>", empty on success
+  double wall_s = 0.0;
+  double robot_s = 0.0;
+  nlohmann::json truth = nlohmann::json::object();  // ground truth used for scoring
+};
+
+/// Runs one episode (thesis Alg. 6): observation pose on the table, ball detection, reachable?
+/// grasp it : turn to the rack, perceive every tool, choose the best one for the action, grasp
+/// its handle (hand-over when it is out of reach, recorded as assisted), pull the ball, put the
+/// tool down, look again and grasp the ball when it is in reach. Writes result.json and images
+/// to request.out_dir when set. Throws std::invalid_argument for bad input (unknown tool,
+/// malformed scene, broken user mesh, unknown action); a stage that fails is a result.
+EpisodeResult RunEpisode(const EpisodeRequest& request);
+
+/// The result as JSON (result.json, one results.jsonl line).
+nlohmann::json EpisodeJson(const EpisodeResult& result);
+
+/// One screen of plain text for a person.
+std::string EpisodeSummary(const EpisodeResult& result);
+
+}  // namespace toolbench::app

@@ -1,0 +1,98 @@
+#!/usr/bin/env python3
+"""Runs `toolbench perceive` over a range of seeds and summarises recognition, pose and timing.
+
+Usage: scripts/perceive_sweep.py BINARY OUT_DIR [--first 1] [--count 20] [perceive options...]
+Writes OUT_DIR/seed<N>/ per seed and OUT_DIR/summary.json; prints the summary.
+A tool counts as a correct pose when it is recognised as the right model, its handle centre is
+within 2 cm and its handle axis within 15 deg of the truth, and its effector direction (x_T)
+within 90 deg (effector facing the right way).
+"""
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+
+def percentile(values, p):
+    if not values:
+        return None
+    v = sorted(values)
+    rank = p / 100 * (len(v) - 1)
+    lo = int(rank)
+    hi = min(lo + 1, len(v) - 1)
+    return v[lo] + (v[hi] - v[lo]) * (rank - lo)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("binary")
+    ap.add_argument("out")
+    ap.add_argument("--first", type=int, default=1)
+    ap.add_argument("--count", type=int, default=20)
+    a, extra = ap.parse_known_args()  # anything else goes to `perceive`
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tools = []
+    per_tool_ms = []
+    per_tool_cpu_ms = []
+    recog_cpu_ms = []
+    stage_ms = {"segmentation": [], "cloud": [], "recognition_and_fit": []}
+    for seed in range(a.first, a.first + a.count):
+        d = out / f"seed{seed}"
+        subprocess.run([a.binary, "--log-level", "warn", "perceive", "--seed", str(seed), "--out", str(d)] + extra,
+                       check=True, stdout=subprocess.DEVNULL)
+        analysis = json.loads((d / "analysis.json").read_text())
+        score = json.loads((d / "score.json").read_text())
+        n = max(1, len(analysis["tools"]))
+        stage_ms["segmentation"].append(analysis["segmentation_ms"])
+        for t in analysis["tools"]:
+            ms = t.get("ms", {})
+            stage_ms["cloud"].append(ms.get("cloud", 0.0))
+            if "recognition_and_fit" in ms:
+                stage_ms["recognition_and_fit"].append(ms["recognition_and_fit"])
+            per_tool_ms.append(analysis["segmentation_ms"] / n + ms.get("cloud", 0.0) +
+                               ms.get("features", 0.0) + ms.get("recognition_and_fit", 0.0))
+            cpu = t.get("cpu_ms")
+            if cpu is not None and "segmentation_cpu_ms" in analysis:
+                per_tool_cpu_ms.append(analysis["segmentation_cpu_ms"] / n + cpu.get("cloud", 0.0) +
+                                       cpu.get("features", 0.0) + cpu.get("recognition_and_fit", 0.0))
+                if "recognition_and_fit" in cpu:
+                    recog_cpu_ms.append(cpu.get("features", 0.0) + cpu["recognition_and_fit"])
+        for t in score["tools"]:
+            t["seed"] = seed
+            tools.append(t)
+    correct = [t for t in tools if t.get("recognition_correct")]
+    handle = [t["handle_error_m"] for t in correct]
+    pose_ok = [t for t in correct if t["handle_error_m"] <= 0.02 and t["axis_error_deg"] <= 15 and
+               t.get("effector_error_deg", 0) <= 90]
+    summary = {
+        "seeds": [a.first, a.first + a.count - 1],
+        "tools": len(tools),
+        "missed": sum(1 for t in tools if t.get("missed")),
+        "recognition_correct": len(correct),
+        "pose_correct": len(pose_ok),
+        "handle_error_m_median_correct": percentile(handle, 50),
+        "handle_error_m_p90_correct": percentile(handle, 90),
+        "handle_error_m_median_all": percentile([t["handle_error_m"] for t in tools if "handle_error_m" in t], 50),
+        "handle_error_m_p90_all": percentile([t["handle_error_m"] for t in tools if "handle_error_m" in t], 90),
+        "ms_per_tool_median": percentile(per_tool_ms, 50),
+        "ms_per_tool_p90": percentile(per_tool_ms, 90),
+        "ms_stage_median": {k: percentile(v, 50) for k, v in stage_ms.items()},
+        "cpu_ms_per_tool_median": percentile(per_tool_cpu_ms, 50),
+        "cpu_ms_per_tool_p90": percentile(per_tool_cpu_ms, 90),
+        "cpu_ms_features_recognition_fit_median": percentile(recog_cpu_ms, 50),
+        "cpu_ms_features_recognition_fit_p90": percentile(recog_cpu_ms, 90),
+        "wrong": [f"seed{t['seed']} {t['name']} {t['cell']} -> {t.get('recognised_as')}"
+                  for t in tools if not t.get("recognition_correct")],
+        "bad_pose": [f"seed{t['seed']} {t['name']} {t['cell']} handle {t['handle_error_m']*1000:.1f} mm axis "
+                     f"{t['axis_error_deg']:.1f} deg effector {t.get('effector_error_deg', float('nan')):.0f} deg"
+                     for t in correct if t not in pose_ok],
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(json.dumps(summary, indent=2))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
