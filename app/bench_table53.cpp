@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "app/capture.h"
+#include "app/perceive.h"
 #include "app/scene_setup.h"
 #include "app/scoring.h"
 #include "app/sweep.h"
@@ -129,6 +130,7 @@ MethodResult Evaluate(const perception::FrameAnalysis& frame, const std::vector<
 nlohmann::json TimesJson(const perception::StageTimes& t) {
   return {{"segmentation", t.segmentation_ms},
           {"cloud", t.cloud_ms},
+          {"classification", t.classification_ms},
           {"recognition", t.recognition_ms},
           {"shape", t.shape_ms},
           {"total", t.total_ms}};
@@ -297,8 +299,14 @@ int RunTable53Bench(const BenchRequest& request) {
     }
   }
   // Prepared once here; the forked case processes inherit them.
-  const perception::ToolAnalyzer ours(base.library, perception::AnalyzerOptions{});
-  const perception::ToolAnalyzer thesis(base.library, perception::AnalyzerOptions::Thesis());
+  // Both recognise with the learned classifier (the thesis had a learned recogniser too); they
+  // differ in the fit and the shape analysis.
+  perception::AnalyzerOptions ours_options;
+  ours_options.classifier_file = DefaultClassifierPath();
+  perception::AnalyzerOptions thesis_options = perception::AnalyzerOptions::Thesis();
+  thesis_options.classifier_file = DefaultClassifierPath();
+  const perception::ToolAnalyzer ours(base.library, ours_options);
+  const perception::ToolAnalyzer thesis(base.library, thesis_options);
 
   auto run_case = [&](const SweepCase& c) {
     const std::string tool = c.params["tool"];

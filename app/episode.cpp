@@ -16,6 +16,7 @@
 
 #include "app/bench.h"
 #include "app/frame_io.h"
+#include "app/perceive.h"
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
@@ -280,7 +281,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     perception::FrameAnalysis analysis;
     RgbdFrame rack_frame;
     std::vector<double> predicted;
-    const perception::ToolAnalyzer analyzer(scene.library, perception::AnalyzerOptions{});
+    perception::AnalyzerOptions analyzer_options;
+    analyzer_options.classifier_file = DefaultClassifierPath();
+    const perception::ToolAnalyzer analyzer(scene.library, analyzer_options);
     const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec));
       rack_frame = see();

@@ -5,6 +5,8 @@
 #include <utility>
 
 #include "common/check.h"
+#include "perception/recognition_features.h"
+#include "perception/tool_classifier.h"
 
 namespace toolbench::perception {
 namespace {
@@ -73,6 +75,8 @@ struct ToolAnalyzer::Impl {
   std::vector<toollib::ToolModel> library;
   AnalyzerOptions options;
   std::unique_ptr<ToolRecognizer> recognizer;
+  std::optional<ToolClassifier> classifier;
+  std::vector<std::string> model_names;
   double preparation_ms = 0.0;
 
   const toollib::ToolModel* Find(const std::string& name) const {
@@ -116,6 +120,11 @@ ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library, const Analyz
   impl_->library = std::move(library);
   impl_->options = options;
   impl_->recognizer = std::make_unique<ToolRecognizer>(impl_->library, options.recognition);
+  impl_->model_names = impl_->recognizer->model_names();
+  if (!options.classifier_file.empty()) {
+    impl_->classifier = ToolClassifier::Load(options.classifier_file);
+    impl_->classifier->RequireLibrary(impl_->model_names);
+  }
   impl_->preparation_ms = Ms(start);
 }
 
@@ -150,8 +159,16 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
       analysis.reason = cloud.reason;
       recognition.reason = cloud.reason;
     } else {
+      std::vector<double> prior;
+      if (impl_->classifier) {
+        t = Clock::now();
+        const std::vector<float> features =
+            ComputeRecognitionFeatures(cloud.p_R, segment.mask, frame.intrinsics, segment.median_depth, {});
+        prior = impl_->classifier->PredictForLibrary(features, impl_->model_names);
+        times.classification_ms = Ms(t);
+      }
       t = Clock::now();
-      recognition = impl_->recognizer->Recognize(cloud.p_R, p_R_camera);
+      recognition = impl_->recognizer->Recognize(cloud.p_R, p_R_camera, prior);
       times.recognition_ms = Ms(t);
       if (recognition.status != FitStatus::kOk) {
         analysis.status = AnalysisStatus::kNoFit;
@@ -170,7 +187,8 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
         times.shape_ms = Ms(t);
       }
     }
-    times.total_ms = times.segmentation_ms + times.cloud_ms + times.recognition_ms + times.shape_ms;
+    times.total_ms =
+        times.segmentation_ms + times.cloud_ms + times.classification_ms + times.recognition_ms + times.shape_ms;
     out.tools.push_back(std::move(analysis));
     out.times.push_back(times);
     out.recognition.push_back(std::move(recognition));

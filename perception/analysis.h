@@ -1,5 +1,6 @@
 #pragma once
 
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -17,6 +18,10 @@ struct AnalyzerOptions {
   SegmentationOptions segmentation;
   ObjectCloudOptions cloud;
   RecognitionOptions recognition;
+  /// Learned tool classifier (ToolClassifier file, e.g. assets/models/tool_classifier.yml.gz);
+  /// its probabilities pick the models the recogniser fits. Empty: no classifier (models are
+  /// pre-selected by principal extents).
+  std::filesystem::path classifier_file;
   /// A recognised model with a confidence below this is still reported, but
   /// `known` is false (the tool may not be in the library), in [0, 1].
   double min_known_confidence = 0.0;
@@ -34,8 +39,9 @@ struct AnalyzerOptions {
 struct StageTimes {
   double segmentation_ms = 0.0;
   double cloud_ms = 0.0;
-  double recognition_ms = 0.0;  // classification/ranking, model fit and refinement
-  double shape_ms = 0.0;        // parts, superquadrics and handle placed in R
+  double classification_ms = 0.0;  // recognition features and the classifier
+  double recognition_ms = 0.0;     // classification/ranking, model fit and refinement
+  double shape_ms = 0.0;           // parts, superquadrics and handle placed in R
   double total_ms = 0.0;
 };
 
@@ -55,7 +61,8 @@ struct FrameAnalysis {
 /// anything but the frame and the library.
 class ToolAnalyzer {
  public:
-  /// Throws std::invalid_argument for bad options or an empty/unusable library.
+  /// Throws std::invalid_argument for bad options, an empty/unusable library, or a classifier
+  /// file that is missing, corrupt or made for another library.
   ToolAnalyzer(std::vector<toollib::ToolModel> library, const AnalyzerOptions& options);
   ~ToolAnalyzer();
   ToolAnalyzer(ToolAnalyzer&&) noexcept;
