@@ -16,7 +16,7 @@ scripts/setup.sh
 echo "== release build and tests"
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOOLBENCH_WERROR=ON >/dev/null
 cmake --build build -j "$jobs"
-ctest --test-dir build --output-on-failure -j 2 -L 'fast|slow|bench'
+ctest --test-dir build --output-on-failure -j 2 -L 'fast|slow|bench|regression'
 [ $quick -eq 1 ] && exit 0
 
 echo "== sanitizer build (ASan + UBSan) of the unit tests"
