@@ -267,6 +267,7 @@ SurfaceSamples SampleSurface(const toollib::TriangleMesh& mesh, int count, std::
   SurfaceSamples out;
   out.points.resize(3, count);
   out.normals.resize(3, count);
+  out.faces.resize(static_cast<std::size_t>(count));
   for (int i = 0; i < count; ++i) {
     const double pick = UniformReal(rng, 0.0, total);
     const auto it = std::upper_bound(cumulative.begin(), cumulative.end(), pick);
@@ -279,6 +280,7 @@ SurfaceSamples SampleSurface(const toollib::TriangleMesh& mesh, int count, std::
                               s * r2 * mesh.vertices.col(mesh.faces(2, f));
     out.points.col(i) = p.cast<float>();
     out.normals.col(i) = normals[static_cast<std::size_t>(f)].cast<float>();
+    out.faces[static_cast<std::size_t>(i)] = static_cast<int>(f);
   }
   return out;
 }

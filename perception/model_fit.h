@@ -19,6 +19,8 @@ namespace toolbench::perception {
 struct SurfaceSamples {
   Eigen::Matrix3Xf points;   // 3 x N sample positions [m]
   Eigen::Matrix3Xf normals;  // 3 x N unit outward face normals
+  std::vector<int> faces;    // N indices of the mesh face each sample lies on (SampleSurface
+                             // fills it; empty for clouds that do not come from a mesh)
 };
 
 /// Area-weighted uniform sampling of a triangle mesh (thesis 2.3.4): a face is picked with
