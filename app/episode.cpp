@@ -281,9 +281,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     perception::FrameAnalysis analysis;
     RgbdFrame rack_frame;
     std::vector<double> predicted;
-    perception::AnalyzerOptions analyzer_options;
-    analyzer_options.classifier_file = DefaultClassifierPath();
-    const perception::ToolAnalyzer analyzer(scene.library, analyzer_options);
+    const perception::ToolAnalyzer analyzer(scene.library, DefaultAnalyzerOptions());
     const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec));
       rack_frame = see();

@@ -3,14 +3,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <ctime>
 #include <iostream>
 #include <optional>
 
+#include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <spdlog/spdlog.h>
 
 #include "app/bench.h"
 #include "app/frame_io.h"
@@ -18,17 +19,15 @@
 #include "perception/model_fit.h"
 #include "perception/object_cloud.h"
 #include "perception/recognition_features.h"
-#include "perception/tool_classifier.h"
 #include "perception/segmentation.h"
+#include "perception/tool_classifier.h"
 
 namespace toolbench::app {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double Ms(Clock::time_point since) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
-}
+double Ms(Clock::time_point since) { return std::chrono::duration<double, std::milli>(Clock::now() - since).count(); }
 
 // CPU time of the process (all threads) [ms]: unlike wall time, it does not grow when other
 // processes share the cores, so it measures the work itself.
@@ -69,8 +68,28 @@ cv::Mat DrawSegments(const RgbdFrame& frame, const std::vector<perception::ToolS
 
 std::filesystem::path DefaultClassifierPath() { return AssetsDir() / "models" / "tool_classifier.yml.gz"; }
 
-int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir,
-                const CaptureOptions& options, const std::filesystem::path& classifier_path) {
+std::filesystem::path DefaultShapeCacheDir() {
+  if (const char* dir = std::getenv("TOOLBENCH_CACHE_DIR"); dir != nullptr && *dir != 0) {
+    return std::filesystem::path(dir) / "shapes";
+  }
+  if (const char* dir = std::getenv("XDG_CACHE_HOME"); dir != nullptr && *dir != 0) {
+    return std::filesystem::path(dir) / "toolbench" / "shapes";
+  }
+  if (const char* home = std::getenv("HOME"); home != nullptr && *home != 0) {
+    return std::filesystem::path(home) / ".cache" / "toolbench" / "shapes";
+  }
+  return {};
+}
+
+perception::AnalyzerOptions DefaultAnalyzerOptions() {
+  perception::AnalyzerOptions options;
+  options.classifier_file = DefaultClassifierPath();
+  options.shape_cache_dir = DefaultShapeCacheDir();
+  return options;
+}
+
+int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir, const CaptureOptions& options,
+                const std::filesystem::path& classifier_path) {
   std::optional<perception::ToolClassifier> classifier;
   if (!classifier_path.empty()) classifier = perception::ToolClassifier::Load(classifier_path);
   sim::GlContext gl;
@@ -129,8 +148,8 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
       if (classifier) {
         t = Clock::now();
         cpu = ProcessCpuMs();
-        const std::vector<float> features = perception::ComputeRecognitionFeatures(
-            cloud.p_R, segment.mask, frame.intrinsics, segment.median_depth, {});
+        const std::vector<float> features =
+            perception::ComputeRecognitionFeatures(cloud.p_R, segment.mask, frame.intrinsics, segment.median_depth, {});
         prior = classifier->PredictForLibrary(features, names);
         tool["ms"]["features"] = Ms(t);
         tool["cpu_ms"]["features"] = ProcessCpuMs() - cpu;
@@ -143,8 +162,8 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
       tool["candidates"] = nlohmann::json::array();
       for (const perception::ModelScore& s : result.scores) {
         if (!s.fitted) continue;
-        tool["candidates"].push_back({{"model", s.model}, {"prior", s.prior}, {"score_m", s.score},
-                                      {"posterior", s.posterior}});
+        tool["candidates"].push_back(
+            {{"model", s.model}, {"prior", s.prior}, {"score_m", s.score}, {"posterior", s.posterior}});
       }
       if (result.status != perception::FitStatus::kOk) {
         tool["status"] = "not_recognised";
@@ -223,8 +242,7 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
         entry["recognition_correct"] = results[i].model == true_tool["name"];
         entry["confidence"] = results[i].confidence;
         entry["handle_error_m"] = error;
-        entry["axis_error_deg"] =
-            std::acos(std::clamp(axis.dot(truth.linear().col(2)), -1.0, 1.0)) * 180.0 / M_PI;
+        entry["axis_error_deg"] = std::acos(std::clamp(axis.dot(truth.linear().col(2)), -1.0, 1.0)) * 180.0 / M_PI;
         // A tool of any spin about its axis (a stick) has no effector direction to get wrong.
         const bool any_spin =
             std::find(model->symmetries.begin(), model->symmetries.end(), "rot_z_any") != model->symmetries.end();
@@ -238,8 +256,8 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
     score["tools"].push_back(entry);
   }
   WriteJson(out_dir / "score.json", score);
-  spdlog::info("perceive: seed {}, {} segment(s) for {} tool(s), written to {}", request.seed,
-               segments.size(), truth["tools"].size(), out_dir.string());
+  spdlog::info("perceive: seed {}, {} segment(s) for {} tool(s), written to {}", request.seed, segments.size(),
+               truth["tools"].size(), out_dir.string());
   std::cout << out_dir.string() << "\n";
   return 0;
 }

@@ -211,7 +211,8 @@ std::vector<SweepLine> ReadSweepResults(const std::vector<std::filesystem::path>
 }
 
 std::vector<SweepLine> RunSweep(const SweepOptions& options, const std::vector<SweepCase>& cases,
-                                const std::function<nlohmann::json(const SweepCase&)>& run_case) {
+                                const std::function<nlohmann::json(const SweepCase&)>& run_case,
+                                const std::function<void(const std::vector<SweepCase>&)>& prepare) {
   options.Validate();
   std::filesystem::create_directories(options.out_dir / "logs");
   const std::filesystem::path results = options.out_dir / "results.jsonl";
@@ -245,6 +246,7 @@ std::vector<SweepLine> RunSweep(const SweepOptions& options, const std::vector<S
     ++in_shard;
     if (finished.count(c.id) == 0) pending.push_back(c);
   }
+  if (prepare) prepare(pending);
   std::ofstream out(results, std::ios::app);
   if (!out) ThrowInvalid("RunSweep: cannot write ", results.string());
   Progress progress(options.protocol, static_cast<int>(pending.size()));

@@ -44,8 +44,11 @@ using SweepLine = nlohmann::json;
 /// the sweep goes on. Progress: a bar with ETA on a terminal (stderr), a plain line per case
 /// otherwise. State the cases need (loaded libraries, prepared models) is best built before
 /// calling, so that children inherit it instead of rebuilding it.
+/// `prepare`, when given, is called once in this process with the cases about to run (after
+/// shard, filter, limit and resume), before any child starts: the place to warm caches.
 std::vector<SweepLine> RunSweep(const SweepOptions& options, const std::vector<SweepCase>& cases,
-                                const std::function<nlohmann::json(const SweepCase&)>& run_case);
+                                const std::function<nlohmann::json(const SweepCase&)>& run_case,
+                                const std::function<void(const std::vector<SweepCase>&)>& prepare = nullptr);
 
 /// Reads results.jsonl files (one per shard folder) and returns their lines, the last line of an
 /// id winning, ordered by index. Throws std::invalid_argument naming a folder without

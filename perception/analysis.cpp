@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "common/check.h"
+#include "perception/parts.h"
 #include "perception/recognition_features.h"
 #include "perception/tool_classifier.h"
 
@@ -28,6 +29,9 @@ void AnalyzerOptions::Validate() const {
   segmentation.Validate();
   cloud.Validate();
   recognition.Validate();
+  if (!(max_known_fit_error > 0.0)) {
+    ThrowInvalid("AnalyzerOptions: max_known_fit_error = ", max_known_fit_error, " (expected > 0)");
+  }
   if (!(min_known_confidence >= 0.0 && min_known_confidence <= 1.0)) {
     ThrowInvalid("AnalyzerOptions: min_known_confidence = ", min_known_confidence, " (expected in [0, 1])");
   }
@@ -43,6 +47,7 @@ AnalyzerOptions AnalyzerOptions::Thesis() {
   fit.euclidean_fitness_epsilon = 1e-6;
   fit.try_flips = false;
   fit.visible_rounds = 0;
+  options.cache_shapes = false;  // reconstruction, SDF and superquadrics for every tool, every time
   return options;
 }
 
@@ -86,29 +91,31 @@ struct ToolAnalyzer::Impl {
     return nullptr;
   }
 
-  /// Handle and features of a recognised library model, placed with the fitted
-  /// pose.
-  void PlaceHandle(const toollib::ToolModel& model, ToolAnalysis& out) const {
-    const Eigen::Isometry3d X_TH = SidecarHandleFrame(model);
-    out.handle.part = 0;
-    out.handle.X_FH = out.X_RT * X_TH;
-    out.handle.center = out.handle.X_FH.translation();
-    out.handle.axis = out.handle.X_FH.linear().col(2);
-    out.handle.radius = model.handle.radius;
-    out.handle.length = model.handle.length;
-    ToolFeatures& f = out.features;
-    f.total_length = model.total_length;
-    f.handle_length = model.handle.length;
-    f.handle_radius = model.handle.radius;
-    f.effector_center = model.effector.center;
-    const Eigen::Vector3d axis = model.effector.axis.normalized();
-    // Extent of the effector segment along each tool axis: its length along its
-    // own axis and its radius across it.
-    for (int i = 0; i < 3; ++i) {
-      const double along = std::abs(axis[i]);
-      f.effector_size[i] = along * model.effector.length + 2.0 * model.effector.radius * std::sqrt(1.0 - along * along);
+  mutable ShapeCache shapes;  // per library model, filled as models are recognised
+
+  /// Parts, superquadrics, handle (Alg. 5) and features of a recognised library model, analysed
+  /// once in T (cached, unless the options ask to redo it every time as the thesis did) and
+  /// placed with the fitted pose.
+  void PlaceShape(const toollib::ToolModel& model, ToolAnalysis& out) const {
+    const ModelShape shape =
+        options.cache_shapes ? shapes.Get(model, options.shape) : AnalyzeModelShape(model, options.shape);
+    Adopt(TransformShape(shape, out.X_RT), out);
+  }
+
+  /// Copies a shape in R into the analysis (status kNoHandle when no part is a handle).
+  static void Adopt(const ModelShape& shape, ToolAnalysis& out) {
+    out.parts = shape.parts;
+    out.handle = shape.handle;
+    out.features = shape.features;
+    if (shape.status != ShapeStatus::kOk) {
+      out.status = AnalysisStatus::kNoHandle;
+      out.reason = "shape analysis failed: " + shape.reason;
+    } else if (shape.handle.part < 0) {
+      out.status = AnalysisStatus::kNoHandle;
+      out.reason = "no part resembles the 32 x 80 mm cylinder the hand holds";
+    } else {
+      out.status = AnalysisStatus::kOk;
     }
-    f.effector_protrusion = model.effector.center.x() + f.effector_size.x() / 2.0;
   }
 };
 
@@ -119,6 +126,7 @@ ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library, const Analyz
   const auto start = Clock::now();
   impl_->library = std::move(library);
   impl_->options = options;
+  impl_->shapes = ShapeCache(options.shape_cache_dir);
   impl_->recognizer = std::make_unique<ToolRecognizer>(impl_->library, options.recognition);
   impl_->model_names = impl_->recognizer->model_names();
   if (!options.classifier_file.empty()) {
@@ -131,6 +139,14 @@ ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library, const Analyz
 ToolAnalyzer::~ToolAnalyzer() = default;
 ToolAnalyzer::ToolAnalyzer(ToolAnalyzer&&) noexcept = default;
 ToolAnalyzer& ToolAnalyzer::operator=(ToolAnalyzer&&) noexcept = default;
+
+void ToolAnalyzer::PrepareShapes(const std::vector<std::string>& models) const {
+  for (const std::string& name : models) {
+    const toollib::ToolModel* model = impl_->Find(name);
+    if (model == nullptr) ThrowInvalid("ToolAnalyzer::PrepareShapes: unknown model '", name, "'");
+    if (impl_->options.cache_shapes) impl_->shapes.Get(*model, impl_->options.shape);
+  }
+}
 
 const std::vector<toollib::ToolModel>& ToolAnalyzer::library() const { return impl_->library; }
 const ToolRecognizer& ToolAnalyzer::recognizer() const { return *impl_->recognizer; }
@@ -179,11 +195,24 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
         TOOLBENCH_DEMAND(model != nullptr);
         analysis.model = recognition.model;
         analysis.confidence = recognition.confidence;
-        analysis.known = recognition.confidence >= impl_->options.min_known_confidence;
         analysis.X_RT = recognition.fit.X_RT;
         analysis.fit_error = recognition.fit.fit_error;
-        impl_->PlaceHandle(*model, analysis);
-        analysis.status = AnalysisStatus::kOk;
+        analysis.known = recognition.confidence >= impl_->options.min_known_confidence &&
+                         recognition.fit.fit_error <= impl_->options.max_known_fit_error;
+        if (analysis.known) {
+          impl_->PlaceShape(*model, analysis);
+        } else {
+          // Not a library tool (or not one we are sure of): analyse what was seen. The pose is
+          // the frame estimated from the observed handle, the confidence stays low.
+          const ModelShape shape = AnalyzeObservedShape(cloud.p_R, frame.X_RC.translation(), impl_->options.shape);
+          analysis.X_RT = shape.X_FT;
+          Impl::Adopt(shape, analysis);
+          if (analysis.status == AnalysisStatus::kOk) {
+            analysis.reason =
+                Cat("unknown tool (closest library model ", recognition.model, ", confidence ", recognition.confidence,
+                    ", fit error ", recognition.fit.fit_error * 1000, " mm): analysed from the observed cloud");
+          }
+        }
         times.shape_ms = Ms(t);
       }
     }

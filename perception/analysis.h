@@ -7,6 +7,7 @@
 #include "common/types.h"
 #include "perception/model_fit.h"
 #include "perception/object_cloud.h"
+#include "perception/parts.h"
 #include "perception/segmentation.h"
 #include "perception/tool_analysis.h"
 #include "toollib/tool_model.h"
@@ -22,15 +23,21 @@ struct AnalyzerOptions {
   /// its probabilities pick the models the recogniser fits. Empty: no classifier (models are
   /// pre-selected by principal extents).
   std::filesystem::path classifier_file;
-  /// A recognised model with a confidence below this is still reported, but
-  /// `known` is false (the tool may not be in the library), in [0, 1].
-  double min_known_confidence = 0.0;
+  ShapeOptions shape;                     // parts, superquadrics and handle choice
+  bool cache_shapes = true;               // analyse each library model's shape once (false: every time)
+  std::filesystem::path shape_cache_dir;  // shape analyses on disk, shared by runs; empty = memory only
+  /// A tool is taken for the recognised library model only when the recogniser's confidence is
+  /// at least min_known_confidence, in [0, 1], and the fit's mean error at most
+  /// max_known_fit_error [m], > 0; otherwise it is analysed as an unknown tool from its cloud.
+  double min_known_confidence = 0.3;
+  double max_known_fit_error = 0.006;
   void Validate() const;  // throws std::invalid_argument naming the field
 
   /// The thesis's configuration (chapter 4) as the baseline to compare against:
   /// point-to-point ICP with 500 iterations and the thesis's epsilons on 4000
   /// model points, principal-axes initialisation only (no flip candidates), no
-  /// visible-surface scoring rounds.
+  /// visible-surface scoring rounds; parts, superquadrics and handle computed for every tool,
+  /// every time (no shape cache).
   static AnalyzerOptions Thesis();
 };
 
@@ -73,6 +80,11 @@ class ToolAnalyzer {
   /// with a status and reason. Throws std::invalid_argument for a malformed
   /// frame (see SegmentTools, ExtractObjectCloud).
   FrameAnalysis Analyze(const RgbdFrame& frame) const;
+
+  /// Analyses (or loads from the shape cache) the shapes of the named library models now, so
+  /// that Analyze does not pay for them (and forked processes inherit them). No effect without
+  /// the shape cache. Throws std::invalid_argument for an unknown name.
+  void PrepareShapes(const std::vector<std::string>& models) const;
 
   /// The library, in the order the recogniser uses.
   const std::vector<toollib::ToolModel>& library() const;

@@ -1,5 +1,7 @@
 #include "perception/parts.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -749,7 +751,7 @@ const ModelShape& ShapeCache::Get(const toollib::ToolModel& model, const ShapeOp
     std::error_code ec;
     std::filesystem::create_directories(dir_, ec);
     // Write to a temporary name and rename, so a concurrent reader never sees half a file.
-    const std::filesystem::path tmp = file.string() + ".tmp";
+    const std::filesystem::path tmp = file.string() + ".tmp" + std::to_string(::getpid());
     {
       std::ofstream out(tmp);
       out << ShapeToJson(shape, key).dump();
