@@ -6,6 +6,7 @@
 
 #include "app/bench_grasp.h"
 #include "app/bench_ik.h"
+#include "app/bench_pull.h"
 #include "common/check.h"
 #include "common/paths.h"
 
@@ -20,6 +21,10 @@ std::vector<BenchProtocol> BenchProtocols() {
                        "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
                        "ground-truth handle pose",
                        RunGraspBench});
+  protocols.push_back({"pull-gt",
+                       "Per library tool (cell rot0): grasp from the ground-truth handle, pull the ball lying out "
+                       "of reach toward the robot, put the tool down, grasp the ball",
+                       RunPullBench});
   return protocols;
 }
 

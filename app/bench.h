@@ -18,6 +18,8 @@ struct BenchRequest {
   int shard_index = 0;                        // this process runs cases i with i % shard_count == shard_index
   int shard_count = 1;                        // >= 1
   int limit = 0;                              // run at most this many cases (0 = all), for quick looks
+  bool frames = false;                        // protocols that support it write overview PNGs per case
+  std::string match;                          // run only cases whose "tool/cell" contains this (empty = all)
 };
 
 /// One benchmark protocol: runs its cases, writes `summary.json` (and whatever else it likes) to
@@ -38,6 +40,11 @@ int RunBench(const BenchRequest& request);
 /// Whether case `index` belongs to this shard.
 inline bool InShard(const BenchRequest& request, int index) {
   return index % request.shard_count == request.shard_index;
+}
+
+/// Whether a case named "tool/cell" passes the request's --match filter.
+inline bool Matches(const BenchRequest& request, const std::string& name) {
+  return request.match.empty() || name.find(request.match) != std::string::npos;
 }
 
 /// Writes JSON to a file with a trailing newline (creating folders).

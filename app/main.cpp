@@ -186,6 +186,10 @@ int main(int argc, char** argv) {
     bench->add_option("--limit", bench_request.limit, "Run at most this many cases (0 = all)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
+    bench->add_flag("--frames", bench_request.frames,
+                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt)");
+    bench->add_option("--match", bench_request.match,
+                      "Run only cases whose 'tool/cell' contains this text (e.g. hoe_1/pos1 or /rot3)");
   }
 
   try {
