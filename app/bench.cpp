@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <regex>
 
 #include "app/bench_grasp.h"
 #include "app/bench_ik.h"
 #include "app/bench_table53.h"
+#include "app/bench_pull.h"
 #include "common/check.h"
 #include "common/paths.h"
 
@@ -22,6 +24,10 @@ std::vector<BenchProtocol> BenchProtocols() {
                        "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
                        "ground-truth handle pose",
                        RunGraspBench, nullptr});
+  protocols.push_back({"pull-gt",
+                       "Per library tool (cell rot0): grasp from the ground-truth handle, pull the ball lying out "
+                       "of reach toward the robot, put the tool down, grasp the ball",
+                       RunPullBench, nullptr});
   protocols.push_back({"table53",
                        "Perception accuracy: every library tool in the 7 Table 5.3 cells, ours vs the thesis "
                        "configuration on the same frames; writes table53.md",
@@ -39,6 +45,15 @@ int RunBench(const BenchRequest& request) {
     known += (known.empty() ? "" : ", ") + protocol.name;
   }
   ThrowInvalid("bench: unknown protocol '", request.protocol, "' (known: ", known.empty() ? "none yet" : known, ")");
+}
+
+bool Matches(const BenchRequest& request, const std::string& name) {
+  if (request.filter.empty()) return true;
+  try {
+    return std::regex_search(name, std::regex(request.filter));
+  } catch (const std::regex_error& e) {
+    ThrowInvalid("bench: --filter '", request.filter, "' is not a valid regular expression (", e.what(), ")");
+  }
 }
 
 SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& protocol, const nlohmann::json& info) {

@@ -25,6 +25,7 @@ struct BenchRequest {
   int jobs = 1;                   // cases run at once, each in its own child process, >= 1
   bool resume = false;            // skip cases already recorded in out_dir/results.jsonl
   bool isolate = true;            // false: run cases in this process (for a debugger)
+  bool frames = false;            // protocols that support it write overview PNGs per case
 };
 
 /// One benchmark protocol: runs its cases, writes `summary.json` (and whatever else it likes) to
@@ -59,6 +60,10 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
 /// and writes that protocol's report to out_dir. Throws std::invalid_argument for folders of
 /// different protocols, a protocol without a report, or malformed results.
 int MergeRuns(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& out_dir);
+
+/// Whether a case named "tool/cell" passes the request's --filter (a regular expression searched
+/// in the name; empty = all). Throws std::invalid_argument for an invalid expression.
+bool Matches(const BenchRequest& request, const std::string& name);
 
 /// Writes JSON to a file with a trailing newline (creating folders).
 void WriteJson(const std::filesystem::path& path, const nlohmann::json& value);

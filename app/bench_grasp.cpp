@@ -11,6 +11,7 @@
 #include <Eigen/Geometry>
 #include <spdlog/spdlog.h>
 
+#include "app/overview.h"
 #include "common/check.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
@@ -45,7 +46,8 @@ void GraspCaseOptions::Validate() const {
 }
 
 GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, const std::string& cell,
-                             std::uint64_t seed, const GraspCaseOptions& options) {
+                             std::uint64_t seed, const GraspCaseOptions& options,
+                             const std::filesystem::path& frame_png) {
   options.Validate();
   const auto wall_start = std::chrono::steady_clock::now();
   GraspCaseResult out;
@@ -81,6 +83,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
   }
   out.grasp = control::GraspHandle(robot, scene.robot, X_RH, grasp_options);
   auto finish = [&] {
+    if (!frame_png.empty()) WriteOverviewPng(world, frame_png);
     out.sim_time = world.time();
     out.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
     return out;
@@ -163,11 +166,14 @@ int RunGraspBench(const BenchRequest& request) {
   const int num_cells = static_cast<int>(std::size(sim::kCellNames));
   for (int index = 0; index < static_cast<int>(tools.size()) * num_cells; ++index) {
     if (!InShard(request, index)) continue;
-    if (request.limit > 0 && run >= request.limit) break;
-    ++run;
     const std::string& tool = tools[index / num_cells];
     const std::string cell(sim::kCellNames[index % num_cells]);
-    const GraspCaseResult r = RunGraspCase(scene, tool, cell, request.seed);
+    if (!Matches(request, tool + "/" + cell)) continue;
+    if (request.limit > 0 && run >= request.limit) break;
+    ++run;
+    const GraspCaseResult r =
+        RunGraspCase(scene, tool, cell, request.seed, {},
+                     request.frames ? request.out_dir / "frames" / (tool + "_" + cell + ".png") : std::filesystem::path());
     for (Tally* t : {&total, &per_tool[tool], &per_cell[cell]}) {
       ++t->n;
       t->ok += r.success ? 1 : 0;

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -48,9 +49,11 @@ struct GraspCaseResult {
 /// Runs one case: composes `scene` with only `tool` in `cell`, settles it, grasps the handle
 /// from its ground-truth pose (X_RT times the handle segment: this isolates control from
 /// perception), lifts, holds and scores. Never throws for a failed grasp (it is a result).
-/// Throws std::invalid_argument for an unknown tool or cell, or bad options.
+/// Throws std::invalid_argument for an unknown tool or cell, or bad options. `frame_png`, when
+/// not empty, receives an overview image of the end of the case.
 GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, const std::string& cell,
-                             std::uint64_t seed, const GraspCaseOptions& options = {});
+                             std::uint64_t seed, const GraspCaseOptions& options = {},
+                             const std::filesystem::path& frame_png = {});
 
 /// Protocol "grasp-gt": every library tool in each of the 7 cells (pos1 pos2 pos3 rot0 rot1
 /// rot2 rot3), case index = tool index * 7 + cell index, grasped from the ground-truth handle

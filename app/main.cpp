@@ -228,6 +228,8 @@ int main(int argc, char** argv) {
     bench->add_flag(
         "--no-isolate", [&](std::int64_t) { bench_request.isolate = false; },
         "Run cases in this process instead of child processes (for a debugger)");
+    bench->add_flag("--frames", bench_request.frames,
+                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt)");
   }
 
   std::vector<std::filesystem::path> merge_dirs;

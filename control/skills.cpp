@@ -84,6 +84,7 @@ void GraspOptions::Validate() const {
   if (!(max_approach_up_cos >= -1 && max_approach_up_cos <= 1)) {
     fail("max_approach_up_cos", max_approach_up_cos, "in [-1, 1]");
   }
+  if (axis_direction < -1 || axis_direction > 1) fail("axis_direction", axis_direction, "-1, 0 or +1");
   if (!(pregrasp_back_m >= 0)) fail("pregrasp_back_m", pregrasp_back_m, ">= 0");
   if (!(pregrasp_up_m >= 0)) fail("pregrasp_up_m", pregrasp_up_m, ">= 0");
   if (!(staging_back_m >= 0)) fail("staging_back_m", staging_back_m, ">= 0");
@@ -99,6 +100,11 @@ void GraspOptions::Validate() const {
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
   if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
   if (screening_ipopt_iterations < 1) fail("screening_ipopt_iterations", screening_ipopt_iterations, "> 0");
+  if (fallback_restarts < 0) fail("fallback_restarts", fallback_restarts, ">= 0");
+  if (fallback_ipopt_iterations < 1) fail("fallback_ipopt_iterations", fallback_ipopt_iterations, "> 0");
+  if (!(fallback_min_approach_cos >= -1 && fallback_min_approach_cos <= 1)) {
+    fail("fallback_min_approach_cos", fallback_min_approach_cos, "in [-1, 1]");
+  }
   if (!(retreat_m >= 0)) fail("retreat_m", retreat_m, ">= 0");
   if (sag_iterations < 0) fail("sag_iterations", sag_iterations, ">= 0");
   if (!(sag_wait > 0)) fail("sag_wait", sag_wait, "> 0");
@@ -277,7 +283,9 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   IkOptions screen_options = options.ik;
   screen_options.presolve_restarts = options.screening_restarts;
   screen_options.max_iterations = options.screening_ipopt_iterations;
-  CartesianSolver screen(chain, desc.HomeQ(), screen_options);
+  IkOptions fallback_options = options.ik;
+  fallback_options.presolve_restarts = options.fallback_restarts;
+  fallback_options.max_iterations = options.fallback_ipopt_iterations;
   double best_error = std::numeric_limits<double>::infinity();
   const int steps = std::max(1, static_cast<int>(std::round(2 * M_PI / options.roll_step_rad)));
   std::vector<double> slides{0.0};
@@ -288,30 +296,38 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   const Eigen::Matrix3d R_flip = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   Plan plan;
   bool planned = false;
-  for (size_t i = 0; i < slides.size() && !planned; ++i) {
-    std::vector<Candidate> feasible;
-    for (int n = 0; n < 2 * steps; ++n) {
-      const bool flipped = n >= steps;
-      const double roll = (n % steps) * 2 * M_PI / steps;
-      ++result.candidates;
-      Eigen::Isometry3d X_RG = X_RH;
-      X_RG.translation() += slides[i] * R_RH.col(2);
-      X_RG.linear() = R_RH * RotZ(roll) * (flipped ? R_flip : Eigen::Matrix3d::Identity());
-      const Eigen::Isometry3d X_RP = X_RG * X_GP;
-      const Eigen::Vector3d approach_dir = X_RP.linear().col(2);  // palm -> handle
-      if (approach_dir.dot(outward) < options.min_approach_cos) continue;
-      if (approach_dir.z() > options.max_approach_up_cos) continue;
-      IkResult ik = screen.Solve(X_RP, q_now);
-      best_error = std::min(best_error, ik.position_error_m);
-      if (Converged(ik)) feasible.push_back({X_RP, roll, flipped, slides[i], std::move(ik)});
-    }
-    result.candidates_feasible += static_cast<int>(feasible.size());
-    std::stable_sort(feasible.begin(), feasible.end(),
-                     [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
-    for (const Candidate& c : feasible) {
-      if (plan_path(c, &plan)) {
-        planned = true;
-        break;
+  // Pass 0: cheap screening; pass 1 (only when pass 0 found no reachable pose at all): a
+  // stronger solver and a wider approach cone, for handles at the edge of the workspace.
+  for (int pass = 0; pass < 2 && !planned; ++pass) {
+    if (pass == 1 && (result.candidates_feasible > 0 || options.fallback_restarts == 0)) break;
+    CartesianSolver screen(chain, desc.HomeQ(), pass == 0 ? screen_options : fallback_options);
+    const double min_cos = pass == 0 ? options.min_approach_cos : options.fallback_min_approach_cos;
+    for (size_t i = 0; i < slides.size() && !planned; ++i) {
+      std::vector<Candidate> feasible;
+      for (int n = 0; n < 2 * steps; ++n) {
+        const bool flipped = n >= steps;
+        if ((options.axis_direction > 0 && flipped) || (options.axis_direction < 0 && !flipped)) continue;
+        const double roll = (n % steps) * 2 * M_PI / steps;
+        ++result.candidates;
+        Eigen::Isometry3d X_RG = X_RH;
+        X_RG.translation() += slides[i] * R_RH.col(2);
+        X_RG.linear() = R_RH * RotZ(roll) * (flipped ? R_flip : Eigen::Matrix3d::Identity());
+        const Eigen::Isometry3d X_RP = X_RG * X_GP;
+        const Eigen::Vector3d approach_dir = X_RP.linear().col(2);  // palm -> handle
+        if (approach_dir.dot(outward) < min_cos) continue;
+        if (approach_dir.z() > options.max_approach_up_cos) continue;
+        IkResult ik = screen.Solve(X_RP, q_now);
+        best_error = std::min(best_error, ik.position_error_m);
+        if (Converged(ik)) feasible.push_back({X_RP, roll, flipped, slides[i], std::move(ik)});
+      }
+      result.candidates_feasible += static_cast<int>(feasible.size());
+      std::stable_sort(feasible.begin(), feasible.end(),
+                       [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
+      for (const Candidate& c : feasible) {
+        if (plan_path(c, &plan)) {
+          planned = true;
+          break;
+        }
       }
     }
   }
@@ -391,6 +407,649 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
   result.status = GraspStatus::kGrasped;
+  return result;
+}
+
+}  // namespace toolbench::control
+
+namespace toolbench::control {
+namespace {
+
+// Largest gap between a long finger joint's encoder and its hand_closed target [rad]: near zero
+// when the fingers closed on nothing.
+double FingerGap(const RobotInterface& robot, const robot::RobotDescription& desc) {
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd enc = robot.ReadEncoders();
+  double max_gap = 0.0;
+  for (const auto& [joint, value] : desc.hand_closed) {
+    if (joint.rfind("r_thumb", 0) == 0) continue;
+    const auto it = std::find(names.begin(), names.end(), joint);
+    if (it == names.end()) continue;
+    max_gap = std::max(max_gap, std::abs(enc[it - names.begin()] - value));
+  }
+  return max_gap;
+}
+
+void RequireHandJoints(const RobotInterface& robot, const robot::RobotDescription& desc, const char* function) {
+  const std::vector<std::string> names = robot.JointNames();
+  for (const auto* hand : {&desc.hand_open, &desc.hand_preshape, &desc.hand_closed}) {
+    for (const auto& [joint, value] : *hand) {
+      if (std::find(names.begin(), names.end(), joint) == names.end()) {
+        ThrowInvalid(function, ": the robot has no joint '", joint, "' of the hand");
+      }
+    }
+  }
+}
+
+void RequireFinite(const Eigen::Isometry3d& X, const char* function, const char* name) {
+  if (!X.matrix().allFinite()) ThrowInvalid(function, ": ", name, " is not finite");
+  const Eigen::Matrix3d R = X.linear();
+  if (!(R.transpose() * R).isIdentity(1e-6) || R.determinant() < 0) {
+    ThrowInvalid(function, ": the rotation part of ", name, " is not a rotation");
+  }
+}
+
+// Largest |encoder - goal| over the chain joints [rad] (the hand joints squeezing a tool never
+// "arrive", so MoveJoints' own verdict cannot be used while holding one); names the joint.
+double ChainError(const RobotInterface& robot, const KinematicChain& chain, const Eigen::VectorXd& q_model_goal,
+                  std::string* worst) {
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd enc = robot.ReadEncoders();
+  double max_error = 0.0;
+  for (int i = 0; i < chain.num_joints(); ++i) {
+    const auto it = std::find(names.begin(), names.end(), chain.joint_names()[i]);
+    if (it == names.end()) continue;
+    const double e = std::abs(enc[it - names.begin()] - q_model_goal[chain.q_indices()[i]]);
+    if (e > max_error) {
+      max_error = e;
+      *worst = chain.joint_names()[i];
+    }
+  }
+  return max_error;
+}
+
+// Follows joint-space waypoints with the hand targets untouched.
+void FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
+                     const MotionOptions& motion) {
+  for (const Eigen::VectorXd& q : path) MoveJoints(robot, ChainGoal(chain, q), motion);
+}
+
+// Straight-line IK waypoints from `from` to `to` (orientation of `to` throughout), warm-started
+// from q; returns the waypoints that converged, stopping at the first that does not.
+std::vector<Eigen::VectorXd> LineWaypoints(CartesianSolver& solver, const Eigen::Isometry3d& from,
+                                           const Eigen::Isometry3d& to, int n, Eigen::VectorXd q) {
+  std::vector<Eigen::VectorXd> path;
+  for (int i = 1; i <= n; ++i) {
+    Eigen::Isometry3d X = to;
+    X.translation() = from.translation() + (static_cast<double>(i) / n) * (to.translation() - from.translation());
+    const IkResult r = solver.Solve(X, q);
+    if (!Converged(r)) break;
+    q = r.q;
+    path.push_back(q);
+  }
+  return path;
+}
+
+}  // namespace
+
+void PullOptions::Validate() const {
+  auto fail = [](const char* field, double value, const char* expected) {
+    ThrowInvalid("PullOptions: ", field, " = ", value, " (expected ", expected, ")");
+  };
+  if (!(clearance_m >= 0)) fail("clearance_m", clearance_m, ">= 0");
+  if (!std::isfinite(height_offset_m)) fail("height_offset_m", height_offset_m, "finite");
+  if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
+  if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
+  if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
+  if (!(min_elevation_rad >= -M_PI / 2 && min_elevation_rad <= max_elevation_rad)) {
+    fail("min_elevation_rad", min_elevation_rad, "in [-pi/2, max_elevation_rad]");
+  }
+  if (!(max_elevation_rad <= M_PI / 2)) fail("max_elevation_rad", max_elevation_rad, "<= pi/2");
+  if (!(elevation_step_rad > 0)) fail("elevation_step_rad", elevation_step_rad, "> 0");
+  if (!(max_yaw_rad >= 0 && max_yaw_rad <= M_PI)) fail("max_yaw_rad", max_yaw_rad, "in [0, pi]");
+  if (!(yaw_step_rad > 0)) fail("yaw_step_rad", yaw_step_rad, "> 0");
+  if (!(max_roll_rad >= 0 && max_roll_rad <= M_PI)) fail("max_roll_rad", max_roll_rad, "in [0, pi]");
+  if (!(roll_step_rad > 0)) fail("roll_step_rad", roll_step_rad, "> 0");
+  if (descend_waypoints < 1) fail("descend_waypoints", descend_waypoints, ">= 1");
+  if (!(clear_back_m >= 0)) fail("clear_back_m", clear_back_m, ">= 0");
+  if (!(clear_up_m >= 0)) fail("clear_up_m", clear_up_m, ">= 0");
+  if (!(max_pull_turn_rad >= 0 && max_pull_turn_rad <= M_PI / 2)) fail("max_pull_turn_rad", max_pull_turn_rad, "in [0, pi/2]");
+  if (!(pull_turn_step_rad > 0)) fail("pull_turn_step_rad", pull_turn_step_rad, "> 0");
+  if (drag_waypoints < 2) fail("drag_waypoints", drag_waypoints, ">= 2");
+  if (lift_waypoints < 1) fail("lift_waypoints", lift_waypoints, ">= 1");
+  if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
+  if (!(arm_arrival_tol > 0)) fail("arm_arrival_tol", arm_arrival_tol, "> 0");
+  if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
+  if (screening_ipopt_iterations < 1) fail("screening_ipopt_iterations", screening_ipopt_iterations, "> 0");
+  transfer.Validate();
+  waypoint.Validate();
+  ik.Validate();
+}
+
+const char* ToString(PullStatus status) {
+  switch (status) {
+    case PullStatus::kPulled: return "pulled";
+    case PullStatus::kUnreachable: return "unreachable";
+    case PullStatus::kIkFailed: return "ik_failed";
+    case PullStatus::kMotionTimeout: return "motion_timeout";
+    case PullStatus::kLostTool: return "lost_tool";
+  }
+  return "unknown";
+}
+
+PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
+                      const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
+                      const PullOptions& options) {
+  options.Validate();
+  RequireFinite(X_PT, "PullObject", "X_PT");
+  if (!p_RO.allFinite()) ThrowInvalid("PullObject: p_RO = (", p_RO.transpose(), ") is not finite");
+  if (!(object_radius > 0)) ThrowInvalid("PullObject: object_radius = ", object_radius, " (expected > 0)");
+  if (!effector.center_T.allFinite()) {
+    ThrowInvalid("PullObject: effector.center_T = (", effector.center_T.transpose(),
+                 ") is not finite: the tool has no effector information");
+  }
+  if (!effector.direction_T.allFinite() || effector.direction_T.norm() < 1e-9) {
+    ThrowInvalid("PullObject: effector.direction_T = (", effector.direction_T.transpose(),
+                 ") is not a finite non-zero direction");
+  }
+  if (!(effector.half_thickness_m >= 0)) {
+    ThrowInvalid("PullObject: effector.half_thickness_m = ", effector.half_thickness_m, " (expected >= 0)");
+  }
+  RequireHandJoints(robot, desc, "PullObject");
+  const auto wall_start = std::chrono::steady_clock::now();
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  IkOptions screen_options = options.ik;
+  screen_options.presolve_restarts = options.screening_restarts;
+  screen_options.max_iterations = options.screening_ipopt_iterations;
+  CartesianSolver screen(chain, desc.HomeQ(), screen_options);
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
+  const Eigen::Isometry3d X_TP = X_PT.inverse();
+
+  PullResult result;
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d u_straight(-p_RO.x(), -p_RO.y(), 0.0);  // toward the robot's vertical axis
+  if (u_straight.norm() < 1e-6) {
+    result.status = PullStatus::kUnreachable;
+    result.reason = "the object is on the robot's vertical axis: no pull direction";
+    return result;
+  }
+  u_straight.normalize();
+  std::vector<double> turns{0.0};
+  for (double t = options.pull_turn_step_rad; t <= options.max_pull_turn_rad + 1e-9; t += options.pull_turn_step_rad) {
+    turns.push_back(-t);  // -: toward the right shoulder (+y_R) for an object in front
+    turns.push_back(t);
+  }
+  Eigen::VectorXd q_above;
+  std::vector<Eigen::VectorXd> descend, drag, lift;
+  std::string last_failure;
+  double best_error = std::numeric_limits<double>::infinity();
+  bool any_feasible = false;
+  bool planned = false;
+  for (const double turn : turns) {
+  const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
+  const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
+  const Eigen::Vector3d p_RE_start = p_RO - behind * u + options.height_offset_m * up;
+
+  // Frames built in T from the palm -> effector line a_T and the working direction d_T, and in R
+  // from the sampled line r and the pull direction u; the tool rotation maps one onto the other.
+  const Eigen::Vector3d p_TP = X_TP.translation();
+  Eigen::Vector3d a_T = effector.center_T - p_TP;
+  const Eigen::Vector3d d_T = effector.direction_T.normalized();
+  if (a_T.norm() < 1e-3) {
+    ThrowInvalid("PullObject: the effector centre is at the palm (", a_T.norm(), " m away): not a tool");
+  }
+  a_T.normalize();
+  auto frame = [](const Eigen::Vector3d& e1, const Eigen::Vector3d& hint) {
+    Eigen::Vector3d e2 = hint - hint.dot(e1) * e1;
+    if (e2.norm() < 1e-6) e2 = e1.unitOrthogonal();
+    e2.normalize();
+    Eigen::Matrix3d F;
+    F.col(0) = e1;
+    F.col(1) = e2;
+    F.col(2) = e1.cross(e2);
+    return F;
+  };
+  const Eigen::Matrix3d F_T = frame(a_T, d_T);
+
+  struct Candidate {
+    Eigen::Isometry3d X_RT;
+    double elevation, yaw, roll;
+    IkResult ik;
+  };
+  std::vector<Candidate> feasible;
+  for (double el = options.min_elevation_rad; el <= options.max_elevation_rad + 1e-9; el += options.elevation_step_rad) {
+    for (double yaw = 0.0; yaw <= options.max_yaw_rad + 1e-9; yaw += options.yaw_step_rad) {
+      for (const double ys : {1.0, -1.0}) {
+        if (yaw == 0.0 && ys < 0) continue;
+        for (double roll = 0.0; roll <= options.max_roll_rad + 1e-9; roll += options.roll_step_rad) {
+          for (const double rs : {1.0, -1.0}) {
+            if (roll == 0.0 && rs < 0) continue;
+            ++result.candidates;
+            const Eigen::Vector3d u_yaw = Eigen::AngleAxisd(ys * yaw, up) * u;
+            const Eigen::Vector3d r = -std::cos(el) * u_yaw - std::sin(el) * up;  // palm -> effector
+            Eigen::Matrix3d F_R = frame(r, u);
+            F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
+            Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
+            X_RT.linear() = F_R * F_T.transpose();
+            X_RT.translation() = p_RE_start - X_RT.linear() * effector.center_T;
+            const Eigen::Isometry3d X_RP = X_RT * X_TP;
+            IkResult ik = screen.Solve(X_RP, q_now);
+            best_error = std::min(best_error, ik.position_error_m);
+            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik)});
+          }
+        }
+      }
+    }
+  }
+  result.candidates_feasible += static_cast<int>(feasible.size());
+  any_feasible = any_feasible || !feasible.empty();
+  std::stable_sort(feasible.begin(), feasible.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
+  const int min_drag = std::max(2, static_cast<int>(std::ceil(options.min_pull_fraction * options.drag_waypoints)));
+  const Candidate* chosen = nullptr;
+  for (const Candidate& c : feasible) {
+    const Eigen::Isometry3d X_RP_start = c.X_RT * X_TP;
+    const IkResult start = solver.Solve(X_RP_start, c.ik.q);
+    if (!Converged(start)) {
+      last_failure = Cat("start IK: ", ToString(start.status));
+      continue;
+    }
+    Eigen::Isometry3d X_RP_above = X_RP_start;
+    X_RP_above.translation() += options.approach_height_m * up;
+    const IkResult above = solver.Solve(X_RP_above, start.q);
+    if (!Converged(above)) {
+      last_failure = Cat("above-start IK: ", ToString(above.status));
+      continue;
+    }
+    descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
+    if (static_cast<int>(descend.size()) < options.descend_waypoints) {
+      last_failure = Cat("descent waypoint ", descend.size() + 1, " IK failed");
+      continue;
+    }
+    Eigen::Isometry3d X_RP_end = X_RP_start;
+    X_RP_end.translation() += options.pull_length_m * u;
+    drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
+    if (static_cast<int>(drag.size()) < min_drag) {
+      last_failure = Cat("drag IK ended after ", drag.size(), " of ", options.drag_waypoints, " waypoints");
+      continue;
+    }
+    Eigen::Isometry3d X_RP_last = X_RP_start;
+    X_RP_last.translation() += (options.pull_length_m * drag.size() / options.drag_waypoints) * u;
+    Eigen::Isometry3d X_RP_up = X_RP_last;
+    X_RP_up.translation() += options.approach_height_m * up;
+    lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back());  // optional
+    q_above = above.q;
+    result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
+    chosen = &c;
+    break;
+  }
+  if (chosen != nullptr) {
+    result.X_RT_start = chosen->X_RT;
+    result.elevation_rad = chosen->elevation;
+    result.yaw_rad = chosen->yaw;
+    result.roll_rad = chosen->roll;
+    result.pull_dir_R = u;
+    result.pull_turn_rad = turn;
+    planned = true;
+    break;
+  }
+  }  // turns
+  result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
+  if (!any_feasible) {
+    result.status = PullStatus::kUnreachable;
+    result.reason = Cat("no sampled tool orientation puts the effector behind the object (", result.candidates,
+                        " sampled; object at ", p_RO.transpose(), " m in R; smallest palm IK error ", best_error,
+                        " m)");
+    return result;
+  }
+  if (!planned) {
+    result.status = PullStatus::kIkFailed;
+    result.reason = Cat(result.candidates_feasible, " start poses reachable but no complete path; last: ", last_failure);
+    return result;
+  }
+
+  const double t0 = robot.Time();
+  {
+    const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
+    Eigen::Vector3d back(-X_RP_now.translation().x(), -X_RP_now.translation().y(), 0.0);
+    back = back.norm() > 1e-6 ? back.normalized() : Eigen::Vector3d::Zero();
+    Eigen::Isometry3d X_clear = X_RP_now;
+    X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
+    const std::vector<Eigen::VectorXd> clear = LineWaypoints(solver, X_RP_now, X_clear, 4, q_now);
+    FollowWaypoints(robot, chain, clear, options.waypoint);
+    // Then a Cartesian path (position on a line, orientation slerped) to above the start, so the
+    // tool does not swing through the rack or the table as a joint-space move may; the joint-space
+    // move below finishes it (or does all of it when a waypoint does not converge).
+    Eigen::VectorXd q = clear.empty() ? q_now : clear.back();
+    const Eigen::Isometry3d X_from = chain.TipPose(q);
+    const Eigen::Isometry3d X_to = chain.TipPose(q_above);
+    const Eigen::Quaterniond r_from(X_from.linear()), r_to(X_to.linear());
+    std::vector<Eigen::VectorXd> path;
+    constexpr int kTransferWaypoints = 8;
+    for (int i = 1; i <= kTransferWaypoints; ++i) {
+      const double t = static_cast<double>(i) / kTransferWaypoints;
+      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+      X.linear() = r_from.slerp(t, r_to).toRotationMatrix();
+      X.translation() = X_from.translation() + t * (X_to.translation() - X_from.translation());
+      const IkResult r = solver.Solve(X, q);
+      if (!Converged(r)) {
+        path.clear();
+        break;
+      }
+      q = r.q;
+      path.push_back(q);
+    }
+    MotionOptions step = options.waypoint;
+    step.duration = options.transfer.duration / kTransferWaypoints * 1.5;
+    FollowWaypoints(robot, chain, path, step);
+  }
+  MoveJoints(robot, ChainGoal(chain, q_above), options.transfer);
+  std::string worst;
+  const double arm_error = ChainError(robot, chain, q_above, &worst);
+  if (arm_error > options.arm_arrival_tol) {
+    result.motion_s = robot.Time() - t0;
+    result.status = PullStatus::kMotionTimeout;
+    result.reason = Cat("above the start not reached: ", worst, " off by ", arm_error, " rad");
+    return result;
+  }
+  FollowWaypoints(robot, chain, descend, options.waypoint);
+  FollowWaypoints(robot, chain, drag, options.waypoint);
+  FollowWaypoints(robot, chain, lift, options.waypoint);
+  result.motion_s = robot.Time() - t0;
+  const double gap = FingerGap(robot, desc);
+  if (gap < options.empty_hand_tol) {
+    result.status = PullStatus::kLostTool;
+    result.reason = Cat("fingers closed to within ", gap, " rad of hand_closed: the tool left the hand");
+    return result;
+  }
+  result.status = PullStatus::kPulled;
+  return result;
+}
+
+}  // namespace toolbench::control
+
+namespace toolbench::control {
+
+void PutDownOptions::Validate() const {
+  if (!(release_height_m >= 0)) ThrowInvalid("PutDownOptions: release_height_m = ", release_height_m, " (expected >= 0)");
+  if (!(retreat_up_m >= 0)) ThrowInvalid("PutDownOptions: retreat_up_m = ", retreat_up_m, " (expected >= 0)");
+  if (!(settle_time >= 0)) ThrowInvalid("PutDownOptions: settle_time = ", settle_time, " (expected >= 0)");
+  transfer.Validate();
+  open.Validate();
+  ik.Validate();
+}
+
+PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
+                      const Eigen::Vector3d& p_R_place, double tool_radius_m, const PutDownOptions& options) {
+  options.Validate();
+  RequireFinite(X_PT, "PutDown", "X_PT");
+  if (!p_R_place.allFinite()) ThrowInvalid("PutDown: p_R_place = (", p_R_place.transpose(), ") is not finite");
+  if (!(tool_radius_m >= 0)) ThrowInvalid("PutDown: tool_radius_m = ", tool_radius_m, " (expected >= 0)");
+  RequireHandJoints(robot, desc, "PutDown");
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  // The grasped handle runs along the grasp axis in P; keep it horizontal: rotate the current palm
+  // orientation so that the grasp axis has no vertical component, then sample yaws about z_R.
+  const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
+  const Eigen::Vector3d axis_R = X_RP_now.linear() * desc.grasp.axis.normalized();
+  Eigen::Vector3d axis_flat(axis_R.x(), axis_R.y(), 0.0);
+  if (axis_flat.norm() < 1e-6) axis_flat = Eigen::Vector3d::UnitX();
+  const Eigen::Matrix3d R_level =
+      Eigen::Quaterniond::FromTwoVectors(axis_R, axis_flat.normalized()).toRotationMatrix() * X_RP_now.linear();
+  const Eigen::Vector3d p_grasp_P = desc.grasp.center;
+  PutDownResult result;
+  for (int k = 0; k < 12; ++k) {
+    const double yaw = (k % 2 == 0 ? 1 : -1) * ((k + 1) / 2) * M_PI / 6;
+    Eigen::Isometry3d X_RP = Eigen::Isometry3d::Identity();
+    X_RP.linear() = Eigen::AngleAxisd(yaw, up).toRotationMatrix() * R_level;
+    // The grasp centre (handle axis) ends tool_radius + release height above the place.
+    const Eigen::Vector3d p_axis = p_R_place + (tool_radius_m + options.release_height_m) * up;
+    X_RP.translation() = p_axis - X_RP.linear() * p_grasp_P;
+    const IkResult low = solver.Solve(X_RP, q_now);
+    if (!Converged(low)) continue;
+    Eigen::Isometry3d X_above = X_RP;
+    X_above.translation() += 0.10 * up;
+    const IkResult above = solver.Solve(X_above, low.q);
+    if (!Converged(above)) continue;
+    const std::vector<Eigen::VectorXd> down = LineWaypoints(solver, X_above, X_RP, 3, above.q);
+    if (down.size() < 3) continue;
+    Eigen::Isometry3d X_up = X_RP;
+    X_up.translation() += options.retreat_up_m * up;
+    const std::vector<Eigen::VectorXd> rise = LineWaypoints(solver, X_RP, X_up, 2, down.back());
+    MoveJoints(robot, ChainGoal(chain, above.q), options.transfer);
+    MotionOptions step = options.open;
+    step.duration = 0.4;
+    step.timeout = 0.1;
+    FollowWaypoints(robot, chain, down, step);
+    MoveJoints(robot, desc.hand_open, options.open);
+    robot.Wait(options.settle_time);
+    FollowWaypoints(robot, chain, rise, step);
+    result.placed = true;
+    result.X_RP = X_RP;
+    return result;
+  }
+  result.reason = Cat("no palm yaw puts the tool above (", p_R_place.transpose(), ") m in R within reach");
+  return result;
+}
+
+void BallGraspOptions::Validate() const {
+  auto fail = [](const char* field, double value, const char* expected) {
+    ThrowInvalid("BallGraspOptions: ", field, " = ", value, " (expected ", expected, ")");
+  };
+  if (!(lift_m >= 0)) fail("lift_m", lift_m, ">= 0");
+  if (!(pregrasp_up_m >= 0)) fail("pregrasp_up_m", pregrasp_up_m, ">= 0");
+  if (!(palm_gap_m >= 0)) fail("palm_gap_m", palm_gap_m, ">= 0");
+  if (!(roll_step_rad > 0 && roll_step_rad <= M_PI)) fail("roll_step_rad", roll_step_rad, "in (0, pi]");
+  if (tilts_rad.empty()) ThrowInvalid("BallGraspOptions: tilts_rad is empty (expected at least one tilt)");
+  for (double t : tilts_rad) {
+    if (!(t >= 0 && t <= M_PI / 2)) fail("tilts_rad[i]", t, "in [0, pi/2]");
+  }
+  if (!(close_time > 0)) fail("close_time", close_time, "> 0");
+  if (!(hold_time >= 0)) fail("hold_time", hold_time, ">= 0");
+  if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
+  transfer.Validate();
+  waypoint.Validate();
+  ik.Validate();
+}
+
+namespace {
+
+// Palm poses for a whole-hand grasp of a ball: the palm normal z_P points at the ball centre from
+// above (tilted toward the robot by `tilt`), rotated about it in steps; the ball's centre lies
+// radius + gap in front of the palm.
+std::vector<Eigen::Isometry3d> BallPalmPoses(const Eigen::Vector3d& p_RB, double radius, double tilt,
+                                             const BallGraspOptions& options) {
+  Eigen::Vector3d toward_robot(-p_RB.x(), -p_RB.y(), 0.0);
+  toward_robot = toward_robot.norm() > 1e-6 ? toward_robot.normalized() : Eigen::Vector3d::UnitX();
+  // z_P from the palm to the ball: down, and away from the robot when tilted (the hand comes from
+  // the robot's side).
+  const Eigen::Vector3d z_P = (-std::cos(tilt) * Eigen::Vector3d::UnitZ() - std::sin(tilt) * toward_robot).normalized();
+  const Eigen::Vector3d x0 = (toward_robot - toward_robot.dot(z_P) * z_P).norm() > 1e-6
+                                 ? (toward_robot - toward_robot.dot(z_P) * z_P).normalized()
+                                 : z_P.unitOrthogonal();
+  std::vector<Eigen::Isometry3d> poses;
+  const int steps = std::max(1, static_cast<int>(std::round(2 * M_PI / options.roll_step_rad)));
+  for (int k = 0; k < steps; ++k) {
+    const Eigen::Vector3d x_P = Eigen::AngleAxisd(k * 2 * M_PI / steps, z_P) * x0;
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear().col(0) = x_P;
+    X.linear().col(1) = z_P.cross(x_P);
+    X.linear().col(2) = z_P;
+    X.translation() = p_RB - (radius + options.palm_gap_m) * z_P;
+    poses.push_back(X);
+  }
+  return poses;
+}
+
+}  // namespace
+
+bool BallInReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Vector3d& p_RB,
+                 double radius, const BallGraspOptions& options) {
+  options.Validate();
+  if (!p_RB.allFinite()) ThrowInvalid("BallInReach: p_RB = (", p_RB.transpose(), ") is not finite");
+  if (!(radius > 0)) ThrowInvalid("BallInReach: radius = ", radius, " (expected > 0)");
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  // A yes/no question over many poses: few restarts (a full failing solve costs ~30 of them).
+  IkOptions quick = options.ik;
+  quick.presolve_restarts = std::min(quick.presolve_restarts, 5);
+  quick.max_iterations = std::min(quick.max_iterations, 30);
+  CartesianSolver solver(chain, desc.HomeQ(), quick);
+  for (double tilt : options.tilts_rad) {
+    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, tilt, options)) {
+      if (Converged(solver.Solve(X, q_model))) return true;
+    }
+  }
+  return false;
+}
+
+GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_RB,
+                      double radius, const BallGraspOptions& options) {
+  options.Validate();
+  if (!p_RB.allFinite()) ThrowInvalid("GraspBall: p_RB = (", p_RB.transpose(), ") is not finite");
+  if (!(radius > 0)) ThrowInvalid("GraspBall: radius = ", radius, " (expected > 0)");
+  RequireHandJoints(robot, desc, "GraspBall");
+  const auto wall_start = std::chrono::steady_clock::now();
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  GraspResult result;
+  Eigen::VectorXd q_pre;
+  std::vector<Eigen::VectorXd> approach, lift;
+  bool planned = false;
+  for (size_t t = 0; t < options.tilts_rad.size() && !planned; ++t) {
+    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, options.tilts_rad[t], options)) {
+      ++result.candidates;
+      const IkResult grasp = solver.Solve(X, q_now);
+      if (!Converged(grasp)) continue;
+      ++result.candidates_feasible;
+      Eigen::Isometry3d X_pre = X;
+      X_pre.translation() += options.pregrasp_up_m * up - 0.5 * options.pregrasp_up_m * X.linear().col(2);
+      const IkResult pre = solver.Solve(X_pre, grasp.q);
+      if (!Converged(pre)) continue;
+      approach = LineWaypoints(solver, X_pre, X, 4, pre.q);
+      if (approach.size() < 4) continue;
+      Eigen::Isometry3d X_up = X;
+      X_up.translation() += options.lift_m * up;
+      lift = LineWaypoints(solver, X, X_up, 3, approach.back());
+      if (lift.size() < 3) continue;
+      q_pre = pre.q;
+      result.X_RP_grasp = X;
+      result.rest_cost = grasp.rest_cost;
+      planned = true;
+      break;
+    }
+  }
+  result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
+  if (!planned) {
+    result.status = result.candidates_feasible == 0 ? GraspStatus::kUnreachable : GraspStatus::kIkFailed;
+    result.reason = Cat("no complete top/side grasp path to the ball at (", p_RB.transpose(), ") m in R (",
+                        result.candidates_feasible, " of ", result.candidates, " palm poses reachable)");
+    return result;
+  }
+  double t0 = robot.Time();
+  std::map<std::string, double> goal = ChainGoal(chain, q_pre);
+  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
+  const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
+  result.transfer_s = robot.Time() - t0;
+  if (!transfer.reached && transfer.max_error > 0.08) {
+    result.status = GraspStatus::kMotionTimeout;
+    result.reason = Cat("pre-grasp not reached: ", transfer.worst_joint, " off by ", transfer.max_error, " rad");
+    return result;
+  }
+  t0 = robot.Time();
+  FollowWaypoints(robot, chain, approach, options.waypoint);
+  result.approach_s = robot.Time() - t0;
+  t0 = robot.Time();
+  MotionOptions close = options.waypoint;
+  close.duration = options.close_time;
+  close.timeout = 0.0;
+  MoveJoints(robot, desc.hand_closed, close);
+  robot.Wait(0.3);
+  result.close_s = robot.Time() - t0;
+  const double gap = FingerGap(robot, desc);
+  if (gap < options.empty_hand_tol) {
+    result.status = GraspStatus::kEmptyHand;
+    result.reason = Cat("fingers closed to within ", gap, " rad of hand_closed: nothing in the hand");
+    return result;
+  }
+  t0 = robot.Time();
+  FollowWaypoints(robot, chain, lift, options.waypoint);
+  robot.Wait(options.hold_time);
+  result.lift_s = robot.Time() - t0;
+  result.status = GraspStatus::kGrasped;
+  return result;
+}
+
+void HandOverOptions::Validate() const {
+  if (!(point_distance_m > 0)) ThrowInvalid("HandOverOptions: point_distance_m = ", point_distance_m, " (expected > 0)");
+  if (!std::isfinite(point_height_m)) ThrowInvalid("HandOverOptions: point_height_m = ", point_height_m, " (expected finite)");
+  if (!(wait_s >= 0)) ThrowInvalid("HandOverOptions: wait_s = ", wait_s, " (expected >= 0)");
+  if (!(close_time > 0)) ThrowInvalid("HandOverOptions: close_time = ", close_time, " (expected > 0)");
+  if (!(settle_time >= 0)) ThrowInvalid("HandOverOptions: settle_time = ", settle_time, " (expected >= 0)");
+  transfer.Validate();
+  hand.Validate();
+  ik.Validate();
+}
+
+HandOverResult HandOver(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_R_tool,
+                        const PlaceToolInHand& place, const HandOverOptions& options) {
+  options.Validate();
+  if (!p_R_tool.allFinite()) ThrowInvalid("HandOver: p_R_tool = (", p_R_tool.transpose(), ") is not finite");
+  if (!place) ThrowInvalid("HandOver: place is empty (expected the human's part of the hand-over)");
+  RequireHandJoints(robot, desc, "HandOver");
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
+  Eigen::Vector3d dir(p_R_tool.x(), p_R_tool.y(), 0.0);
+  dir = dir.norm() > 1e-6 ? dir.normalized() : Eigen::Vector3d(-1, 0, 0);
+  const Eigen::Vector3d p = options.point_distance_m * dir + options.point_height_m * Eigen::Vector3d::UnitZ();
+  // Palm up (z_P, palm -> held object, points up), tilted toward the robot as far as needed.
+  HandOverResult result;
+  Eigen::VectorXd q_goal;
+  for (int tilt_deg = 0; tilt_deg <= 80 && q_goal.size() == 0; tilt_deg += 20) {
+    const double tilt = tilt_deg * M_PI / 180.0;
+    const Eigen::Vector3d z_P = (std::cos(tilt) * Eigen::Vector3d::UnitZ() - std::sin(tilt) * dir).normalized();
+    for (int k = 0; k < 12; ++k) {
+      const Eigen::Vector3d x0 = (dir - dir.dot(z_P) * z_P).normalized();
+      const Eigen::Vector3d x_P = Eigen::AngleAxisd(k * M_PI / 6, z_P) * x0;
+      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+      X.linear().col(0) = x_P;
+      X.linear().col(1) = z_P.cross(x_P);
+      X.linear().col(2) = z_P;
+      X.translation() = p;
+      const IkResult r = solver.Solve(X, q_now);
+      if (Converged(r)) {
+        q_goal = r.q;
+        result.X_RP = X;
+        break;
+      }
+    }
+  }
+  if (q_goal.size() == 0) {
+    result.reason = Cat("no open-palm pose at (", p.transpose(), ") m in R toward the tool is reachable");
+    return result;
+  }
+  std::map<std::string, double> goal = ChainGoal(chain, q_goal);
+  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
+  MoveJoints(robot, goal, options.transfer);
+  robot.Wait(options.wait_s);
+  // The palm pose the human sees: where the encoders put it (not the IK target).
+  const Eigen::Isometry3d X_RP_now = chain.TipPose(ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders()));
+  result.X_RP = X_RP_now;
+  place(X_RP_now);
+  // Close at once (no preshape): the tool lies loose on the palm.
+  MotionOptions close = options.hand;
+  close.duration = options.close_time;
+  MoveJoints(robot, desc.hand_closed, close);
+  robot.Wait(options.settle_time);
+  const double gap = FingerGap(robot, desc);
+  result.holding = gap >= 0.05;
+  if (!result.holding) result.reason = Cat("fingers closed to within ", gap, " rad of hand_closed: nothing in the hand");
   return result;
 }
 

@@ -1,7 +1,9 @@
 #pragma once
 
 #include <cmath>
+#include <functional>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -31,6 +33,10 @@ struct GraspOptions {
   /// Maximum cosine between the approach direction and the root's up axis z_R, in [-1, 1]:
   /// rejects palms that would come from below, through the ledge the tool stands on.
   double max_approach_up_cos = 0.5;
+  /// Which way the hand's grasp axis y_P may run along the handle: 0 = either (the lowest rest
+  /// cost decides), +1 = along +z_H only, -1 = along -z_H only. The pull wants the tool's effector
+  /// on a given side of the hand.
+  int axis_direction = 0;
   double pregrasp_back_m = 0.07;  // pre-grasp offset back along -z_P from the grasp pose [m], >= 0
   double pregrasp_up_m = 0.02;    // extra pre-grasp offset up along z_R [m], >= 0
   /// Staging pose, where the joint-space transfer ends: the pre-grasp moved this far back toward
@@ -38,7 +44,9 @@ struct GraspOptions {
   double staging_back_m = 0.10;
   double staging_up_m = 0.08;
   int approach_waypoints = 4;  // IK waypoints on the straight line pre-grasp -> grasp, >= 1
-  double lift_m = 0.08;        // straight lift along z_R after closing [m], >= 0
+  /// Straight lift along z_R after closing [m], >= 0. More than the 5 cm success margin: tools
+  /// lying across the rack pivot in the grip as they come up, so their origin rises less.
+  double lift_m = 0.11;
   int lift_waypoints = 4;      // IK waypoints of the lift, >= 1
   /// When the straight lift is out of reach, the lift also moves this far back toward the robot
   /// (horizontally, toward the root's z axis) [m], >= 0.
@@ -70,6 +78,12 @@ struct GraspOptions {
   /// Ipopt iterations: presolve_restarts, >= 0, and max_iterations, > 0.
   int screening_restarts = 3;
   int screening_ipopt_iterations = 10;
+  /// When the cheap screening finds no reachable palm pose at all (handles at the edge of the
+  /// workspace), screen again with this many restarts and Ipopt iterations (0 = no second pass),
+  /// and with min_approach_cos lowered to fallback_min_approach_cos.
+  int fallback_restarts = 12;
+  int fallback_ipopt_iterations = 60;
+  double fallback_min_approach_cos = 0.0;
   void Validate() const;  // throws std::invalid_argument naming the field and its value
 };
 
@@ -127,5 +141,203 @@ struct GraspResult {
 /// not a rotation, and when desc has no right-arm chain or robot lacks a joint of desc's hand.
 GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_RH,
                         const GraspOptions& options = {});
+
+
+/// The working part of a tool held in the hand, in the tool frame T (toollib's effector segment).
+struct ToolEffector {
+  /// Effector centre p_TE in T [m]; finite.
+  Eigen::Vector3d center_T = Eigen::Vector3d::Constant(std::nan(""));
+  /// Working direction in T (the side that meets the object when pulling; +x_T for library
+  /// tools); finite and non-zero (normalised by the skill).
+  Eigen::Vector3d direction_T = Eigen::Vector3d::UnitX();
+  double half_thickness_m = 0.005;  // effector half-size along the working direction [m], >= 0
+};
+
+/// Options of PullObject. Defaults pull the scene's ball (scenes/default.json) with library tools
+/// grasped from the rack (measured by `toolbench bench --protocol pull-gt`).
+struct PullOptions {
+  double clearance_m = 0.01;        // gap between the object's far surface and the effector [m], >= 0
+  double height_offset_m = 0.0;     // effector centre height above the object centre [m]
+  double pull_length_m = 0.25;      // planned drag toward the robot [m], > 0
+  /// The drag may be cut short where IK stops converging, but not below this fraction of
+  /// pull_length_m, in (0, 1].
+  double min_pull_fraction = 0.3;
+  double approach_height_m = 0.10;  // the effector comes down from this far above the start [m], >= 0
+  /// Tool orientations sampled: elevation of the palm -> effector line below the horizontal
+  /// (min..max, step) [rad]; yaw of that line about z_R either side of the pull line [rad];
+  /// roll of the tool about that line either side of "working side faces the robot" [rad].
+  double min_elevation_rad = 20.0 * M_PI / 180.0;
+  double max_elevation_rad = 50.0 * M_PI / 180.0;
+  double elevation_step_rad = 15.0 * M_PI / 180.0;
+  double max_yaw_rad = 60.0 * M_PI / 180.0;
+  double yaw_step_rad = 20.0 * M_PI / 180.0;
+  double max_roll_rad = 90.0 * M_PI / 180.0;
+  double roll_step_rad = 30.0 * M_PI / 180.0;
+  /// Before the joint-space transfer the hand first moves straight back toward the robot's axis
+  /// (horizontally) and up by these amounts, keeping its orientation, so that the tool leaves the
+  /// place it was taken from (the rack) before it swings [m], >= 0; cut short where IK ends.
+  double clear_back_m = 0.15;
+  double clear_up_m = 0.05;
+  /// The drag direction may turn about z_R away from "straight toward the robot's axis" by up to
+  /// this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first that
+  /// plans wins, straight first): the start then lies nearer the right shoulder.
+  double max_pull_turn_rad = 30.0 * M_PI / 180.0;
+  double pull_turn_step_rad = 15.0 * M_PI / 180.0;  // > 0
+  int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
+  int drag_waypoints = 10;    // IK waypoints of the drag, >= 2
+  int lift_waypoints = 2;     // IK waypoints of the lift after the drag, >= 1
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 0.5};  // current posture -> above the start
+  MotionOptions waypoint{0.3, 0.01, 0.02, 0.05, 0.1};  // each descent / drag / lift waypoint
+  /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
+  double empty_hand_tol = 0.05;
+  double arm_arrival_tol = 0.08;  // largest arm joint error accepted above the start [rad], > 0
+  IkOptions ik;                   // waypoint solves
+  int screening_restarts = 3;     // cheap IK for sampled orientations: restarts, >= 0
+  int screening_ipopt_iterations = 10;  // and Ipopt iterations, > 0
+  void Validate() const;  // throws std::invalid_argument naming the field and its value
+};
+
+/// How a pull ended.
+enum class PullStatus {
+  kPulled,         // the effector went behind the object and was dragged toward the robot
+  kUnreachable,    // no sampled tool orientation puts the effector behind the object within reach
+  kIkFailed,       // a start pose was reachable but the approach or the drag was not
+  kMotionTimeout,  // the arm did not arrive above the start
+  kLostTool,       // the fingers closed all the way: the tool left the hand
+};
+
+/// Human-readable name of a status ("pulled", "unreachable", ...).
+const char* ToString(PullStatus status);
+
+/// Outcome of PullObject.
+struct PullResult {
+  PullStatus status = PullStatus::kUnreachable;
+  std::string reason;                                      // empty when pulled
+  Eigen::Isometry3d X_RT_start = Eigen::Isometry3d::Identity();  // planned tool pose at the drag start, in R
+  Eigen::Vector3d pull_dir_R = Eigen::Vector3d::Zero();    // unit horizontal drag direction in R
+  double pull_turn_rad = 0.0;    // its turn from "straight toward the robot's axis" [rad]
+  double planned_drag_m = 0.0;   // length of the planned drag [m]
+  double elevation_rad = 0.0;    // chosen orientation sample (see PullOptions)
+  double yaw_rad = 0.0;
+  double roll_rad = 0.0;
+  int candidates = 0;            // orientations sampled
+  int candidates_feasible = 0;   // with a converged start-pose IK
+  double plan_ms = 0.0;          // wall time of planning [ms], informational
+  double motion_s = 0.0;         // robot time of the whole motion [s]
+};
+
+/// Pulls an object (a ball) toward the robot with a tool held in the right hand:
+///  1. the pull direction u is horizontal, from the object toward the robot's z axis (or turned
+///     by up to max_pull_turn_rad, straight first); the start
+///     puts the effector centre beyond the object, (object_radius + clearance_m +
+///     effector.half_thickness_m) from its centre along -u, at its centre height (+ height_offset_m);
+///  2. samples tool orientations: the palm -> effector line points away from the robot and down
+///     (elevation, yaw about z_R), the working direction as close to u as that allows (roll),
+///     screens each with a cheap IK of the palm pose X_RP = X_RT * X_PT^-1, then plans, lowest
+///     rest cost first: above the start (approach_height_m up), straight descent, straight drag
+///     of pull_length_m along u (cut short where IK ends, not below min_pull_fraction), lift;
+///  3. moves there (joint space to above the start, then the waypoints) keeping the hand closed,
+///     and checks from the finger encoders that the tool is still in the hand.
+/// `X_PT` is the tool in the palm frame as the grasp left it (handle pose times the planned palm
+/// pose: GraspResult::X_RP_grasp.inverse() * X_RH * X_TH.inverse()); `p_RO` the object centre in R.
+/// Never throws for an unreachable object (a status). Throws std::invalid_argument for bad
+/// options, a non-finite p_RO, X_PT or effector (a tool without effector information), a
+/// non-positive object_radius, or a robot without the hand joints.
+PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
+                      const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
+                      const PullOptions& options = {});
+
+/// Options of PutDown.
+struct PutDownOptions {
+  double release_height_m = 0.03;  // lowest tool point this far above the surface when the hand opens [m], >= 0
+  double retreat_up_m = 0.10;      // the open hand rises this far afterwards [m], >= 0
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
+  MotionOptions open{0.5, 0.01, 0.02, 0.05, 0.0};
+  double settle_time = 0.5;        // wait after opening [s], >= 0
+  IkOptions ik;
+  void Validate() const;
+};
+
+/// Outcome of PutDown.
+struct PutDownResult {
+  bool placed = false;           // the hand reached the place and opened
+  std::string reason;            // why not, when not placed
+  Eigen::Isometry3d X_RP = Eigen::Isometry3d::Identity();  // palm pose where the hand opened
+};
+
+/// Puts a held tool down: moves the palm so that the tool hangs above `p_R_place` (a free spot on
+/// a horizontal surface at height p_R_place.z(), in R) with the tool's handle horizontal, lowered
+/// until its lowest point (tool_radius_m below the handle axis) is release_height_m above the
+/// surface, opens the hand, waits, and lifts the open hand. Tries palm yaws about z_R until IK
+/// converges. Throws std::invalid_argument for bad options or non-finite input.
+PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
+                      const Eigen::Vector3d& p_R_place, double tool_radius_m, const PutDownOptions& options = {});
+
+/// Options of GraspBall.
+struct BallGraspOptions {
+  double lift_m = 0.08;            // lift after closing [m], >= 0
+  double pregrasp_up_m = 0.08;     // the palm comes down from this far above the grasp [m], >= 0
+  /// Gap between the palm and the ball's surface along the palm normal [m], >= 0 (the fingers
+  /// wrap around the ball from there).
+  double palm_gap_m = 0.01;
+  double roll_step_rad = 30.0 * M_PI / 180.0;  // palm rotations sampled about its normal, in (0, pi]
+  /// Tilts of the palm normal from straight down toward "from the robot side" tried in turn
+  /// (0 = top grasp, larger = side grasp) [rad], each in [0, pi/2].
+  std::vector<double> tilts_rad{0.0, 0.5, 1.0};
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
+  MotionOptions waypoint{0.4, 0.01, 0.02, 0.05, 0.1};
+  double close_time = 0.8;         // [s], > 0
+  double hold_time = 0.5;          // [s], >= 0
+  double empty_hand_tol = 0.05;    // [rad], > 0
+  IkOptions ik;
+  void Validate() const;
+};
+
+/// Whether a palm pose to grasp a ball at p_RB (radius, in R) from above has a converged IK: the
+/// bench's definition of "the ball is within reach". Throws on non-finite input.
+bool BallInReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Vector3d& p_RB,
+                 double radius, const BallGraspOptions& options = {});
+
+/// Grasps a ball lying on the table with a whole-hand top grasp: palm above the ball (normal
+/// down), fingers wrapping around it, close, lift. Statuses as GraspHandle's (kGrasped means the
+/// fingers stopped on something; scoring checks the lift from ground truth). Throws
+/// std::invalid_argument for bad options, non-finite p_RB or a non-positive radius.
+GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_RB,
+                      double radius, const BallGraspOptions& options = {});
+
+/// Options of the hand-over fallback.
+struct HandOverOptions {
+  double point_distance_m = 0.30;  // the open palm goes this far from the root axis toward the tool [m], > 0
+  double point_height_m = 0.10;    // at this height in R [m]
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
+  MotionOptions hand{0.5, 0.01, 0.02, 0.05, 0.0};
+  double wait_s = 1.0;             // the open hand waits this long for the tool [s], >= 0
+  double close_time = 0.3;         // [s], > 0
+  double settle_time = 0.3;        // [s], >= 0
+  IkOptions ik;
+  void Validate() const;
+};
+
+/// The human's part of a hand-over: places the tool in the open hand. Called once by HandOver
+/// while the hand waits open, with the palm pose X_RP where the hand waits (in R). Implemented
+/// by the simulator as an explicit, recorded teleport of the tool's free joint (the only one the
+/// bench permits), by a real setup as a person.
+using PlaceToolInHand = std::function<void(const Eigen::Isometry3d& X_RP)>;
+
+/// Outcome of HandOver.
+struct HandOverResult {
+  bool assisted = true;          // always true: the tool came from a human, not from a grasp
+  bool holding = false;          // the fingers stopped on something after closing
+  std::string reason;            // why not holding
+  Eigen::Isometry3d X_RP = Eigen::Isometry3d::Identity();  // palm pose where the hand waited
+};
+
+/// The hand-over fallback (thesis Fig. 5.20): points the open hand toward the tool at p_R_tool
+/// (palm up, at point_distance_m from the root axis in the tool's direction), waits, calls
+/// `place` (the human puts the tool in the hand), closes the hand and checks the fingers stopped
+/// on something. The result is flagged assisted. Throws std::invalid_argument for bad options, a
+/// non-finite p_R_tool or an empty `place`.
+HandOverResult HandOver(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_R_tool,
+                        const PlaceToolInHand& place, const HandOverOptions& options = {});
 
 }  // namespace toolbench::control

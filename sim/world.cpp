@@ -211,6 +211,26 @@ void World::TeleportJoints(const Eigen::VectorXd& q) {
   mj_forward(impl_->m, impl_->d);
 }
 
+void World::TeleportFreeBody(std::string_view body, const Eigen::Isometry3d& X_WB) {
+  const mjModel* m = impl_->m;
+  const int id = mj_name2id(m, mjOBJ_BODY, std::string(body).c_str());
+  if (id < 0) ThrowInvalid("World::TeleportFreeBody: unknown body '", body, "'");
+  const int jnt = m->body_jntadr[id];
+  if (m->body_jntnum[id] != 1 || m->jnt_type[jnt] != mjJNT_FREE) {
+    ThrowInvalid("World::TeleportFreeBody: body '", body, "' has no free joint");
+  }
+  if (!X_WB.matrix().allFinite()) ThrowInvalid("World::TeleportFreeBody: the pose of '", body, "' is not finite");
+  double* qpos = impl_->d->qpos + m->jnt_qposadr[jnt];
+  const Eigen::Quaterniond q(X_WB.linear());
+  for (int i = 0; i < 3; ++i) qpos[i] = X_WB.translation()[i];
+  qpos[3] = q.w();
+  qpos[4] = q.x();
+  qpos[5] = q.y();
+  qpos[6] = q.z();
+  for (int i = 0; i < 6; ++i) impl_->d->qvel[m->jnt_dofadr[jnt] + i] = 0.0;
+  mj_forward(impl_->m, impl_->d);
+}
+
 GroundTruth World::ground_truth() const {
   GroundTruth truth;
   truth.time = impl_->d->time;

@@ -69,6 +69,12 @@ class World {
   /// test or a posture at time 0; not for use during an episode).
   void TeleportJoints(const Eigen::VectorXd& q);
 
+  /// Moves a body with a free joint (a tool, the ball) to X_WB at rest. The one use permitted
+  /// during an episode is the recorded hand-over fallback (a human puts the tool in the hand);
+  /// callers must record it. Throws std::invalid_argument naming an unknown body, one without a
+  /// free joint, or a non-finite pose.
+  void TeleportFreeBody(std::string_view body, const Eigen::Isometry3d& X_WB);
+
   /// Snapshot of all named body poses (ground truth, for scoring and tests only).
   GroundTruth ground_truth() const;
   /// Number of active contacts.

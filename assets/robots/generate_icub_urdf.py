@@ -663,7 +663,7 @@ def build_geometry(robot, hand):
 
 
 def add_left_arm(robot, home):
-    """Left arm, fixed on the chest in the home pose: every right-arm link (shoulder to
+    """Left arm, fixed on the chest in the given posture of the right arm (`home`): every right-arm link (shoulder to
     fingertips) mirrored through the sagittal plane (root y -> -y) and renamed r_* -> l_*.
     A reflection of a box/cylinder/sphere pose (p, R) is the same primitive at (M p, M R M)."""
     Xh = robot.fk(home)
@@ -859,6 +859,7 @@ def design_gains(robot, samples=1500, seed=7):
 
 # icub.md section 9: Gazebo start pose, right arm (deg); torso and neck 0; hand open.
 HOME_ARM_DEG = [-29.8, 29.8, 0.0, 45.0, 0.0, 0.0, 0.0]
+LEFT_ARM_PARK_DEG = [0.0, 80.0, 0.0, 90.0, 0.0, 0.0, 0.0]  # fixed left arm: raised to the side
 HAND_GROUPS = {
     "thumb": ["r_thumb_oppose", "r_thumb_proximal", "r_thumb_distal"],
     "index": ["r_index_proximal", "r_index_distal"],
@@ -1009,8 +1010,13 @@ def build():
     build_kinematics(robot)
     hand = build_hand(robot)
     build_geometry(robot, hand)
-    home = {k: v * D2R for k, v in home_deg(robot).items()}
-    add_left_arm(robot, home)
+    # The left arm is raised to the side, elbow bent (ours: the robot only uses its right arm).
+    # In the home pose its hand would reach over the table, which it then hits when the torso
+    # pitches forward to reach the rack or the ball.
+    park = {k: v * D2R for k, v in home_deg(robot).items()}
+    for (name, *_), v in zip(ARM_R_V2_DH, LEFT_ARM_PARK_DEG):
+        park[name] = v * D2R
+    add_left_arm(robot, park)
     compute_inertials(robot)
     gains = design_gains(robot)
     return robot, gains

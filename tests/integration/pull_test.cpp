@@ -1,0 +1,96 @@
+// Pull, ball grasp and hand-over skills: bad input gives clear errors, an out-of-reach pull moves
+// nothing, and the hand-over fallback holds a tool put into the open hand (issue 4).
+#include <cmath>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "app/scene_setup.h"
+#include "control/skills.h"
+#include "sim/world.h"
+
+namespace toolbench::app {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+TEST(PullTest, RejectsBadInput) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  const LoadedScene scene = LoadScene(request);
+  sim::World world(scene.composed.mjcf, "pull bad input");
+  sim::SimRobot robot(world);
+  control::ToolEffector effector;
+  effector.center_T = Eigen::Vector3d(0, 0, 0.3);
+  const Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
+  const Eigen::Vector3d nan_target(std::nan(""), 0.0, 0.0);
+  EXPECT_THAT([&] { control::PullObject(robot, scene.robot, X_PT, effector, nan_target, 0.035); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("p_RO")));
+  const control::ToolEffector no_effector;  // centre NaN: a tool without effector information
+  EXPECT_THAT(
+      [&] { control::PullObject(robot, scene.robot, X_PT, no_effector, Eigen::Vector3d(-0.5, 0, 0), 0.035); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("no effector information")));
+  EXPECT_THAT([&] { control::PullObject(robot, scene.robot, X_PT, effector, Eigen::Vector3d(-0.5, 0, 0), 0.0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("object_radius")));
+  control::PullOptions bad;
+  bad.drag_waypoints = 1;
+  EXPECT_THAT(
+      [&] { control::PullObject(robot, scene.robot, X_PT, effector, Eigen::Vector3d(-0.5, 0, 0), 0.035, bad); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("drag_waypoints")));
+  EXPECT_THAT([&] { control::GraspBall(robot, scene.robot, nan_target, 0.035); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("p_RB")));
+  EXPECT_THAT([&] { control::HandOver(robot, scene.robot, Eigen::Vector3d(-0.2, 0.5, 0), {}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("place")));
+  EXPECT_THAT([&] { world.TeleportFreeBody("rack", Eigen::Isometry3d::Identity()); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("no free joint")));
+  // Out of reach: 2 m away, and nothing moves.
+  const Eigen::VectorXd before = robot.PositionTargets();
+  const control::PullResult far =
+      control::PullObject(robot, scene.robot, X_PT, effector, Eigen::Vector3d(-2.0, 0.0, 0.0), 0.035);
+  EXPECT_EQ(far.status, control::PullStatus::kUnreachable);
+  EXPECT_EQ(robot.PositionTargets(), before);
+}
+
+TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  const LoadedScene scene = LoadScene(request);
+  sim::World world(scene.composed.mjcf, "hand-over");
+  world.SettleFreeBodies(scene.spec.physics.settle_time);
+  sim::SimRobot robot(world);
+  const std::string body = scene.composed.tools.front().body;
+  const toollib::ToolModel* model = nullptr;
+  for (const auto& t : scene.library) {
+    if (t.name == "stick_2") model = &t;
+  }
+  ASSERT_NE(model, nullptr);
+  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+  const Eigen::Vector3d p_R_tool = X_RW * world.ground_truth().Pose(body).translation();
+  int placed = 0;
+  // The human: the handle centre onto the hand's grasp cylinder, handle along its axis (the one
+  // permitted teleport, counted here as the bench records it).
+  const auto place = [&](const Eigen::Isometry3d& X_RP) {
+    ++placed;
+    Eigen::Isometry3d X_PH = Eigen::Isometry3d::Identity();
+    X_PH.linear() = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), scene.robot.grasp.axis.normalized())
+                        .toRotationMatrix();
+    X_PH.translation() = scene.robot.grasp.center;
+    Eigen::Isometry3d X_TH = Eigen::Isometry3d::Identity();
+    X_TH.translation() = model->handle.center;
+    world.TeleportFreeBody(body, scene.composed.X_WR * X_RP * X_PH * X_TH.inverse());
+  };
+  const control::HandOverResult r = control::HandOver(robot, scene.robot, p_R_tool, place);
+  EXPECT_EQ(placed, 1);
+  EXPECT_TRUE(r.assisted);
+  ASSERT_TRUE(r.holding) << r.reason;
+  robot.Wait(1.0);
+  // Still in the hand: the handle centre stays near the grasp cylinder's centre.
+  const Eigen::Isometry3d X_WP = world.ground_truth().Pose(scene.robot.palm_frame);
+  const Eigen::Vector3d p_P_handle =
+      X_WP.inverse() * world.ground_truth().Pose(body) * model->handle.center;
+  EXPECT_LT((p_P_handle - scene.robot.grasp.center).norm(), 0.05) << p_P_handle.transpose();
+}
+
+}  // namespace
+}  // namespace toolbench::app
