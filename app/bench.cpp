@@ -5,6 +5,7 @@
 #include <limits>
 #include <regex>
 
+#include "app/bench_episodes.h"
 #include "app/bench_grasp.h"
 #include "app/bench_ik.h"
 #include "app/bench_table53.h"
@@ -32,6 +33,10 @@ std::vector<BenchProtocol> BenchProtocols() {
                        "Perception accuracy: every library tool in the 7 Table 5.3 cells, ours vs the thesis "
                        "configuration on the same frames; writes table53.md",
                        RunTable53Bench, ReportTable53});
+  protocols.push_back({"random",
+                       "Full episodes (--episodes N) with randomized tools, cells and ball positions: grasp, pull "
+                       "and ball-grasp rates with 95% intervals, stage times; writes summary.md",
+                       RunRandomEpisodesBench, ReportRandomEpisodes});
   return protocols;
 }
 

@@ -96,7 +96,8 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   summary["wall_s_median"] = Percentile(wall_s, 50);
   summary["wall_s_p90"] = Percentile(wall_s, 90);
   for (const auto& [name, values] : stage_ms) {
-    summary["stage_ms"][name] = {{"median", Percentile(values, 50)}, {"p90", Percentile(values, 90)}, {"n", values.size()}};
+    summary["stage_ms"][name] = {
+        {"median", Percentile(values, 50)}, {"p90", Percentile(values, 90)}, {"n", values.size()}};
   }
   summary["failures"] = failures;
   WriteJson(request.out_dir / "summary.json", summary);

@@ -9,10 +9,10 @@
 #include <sstream>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
-#include <spdlog/spdlog.h>
 
 #include "app/bench.h"
 #include "app/frame_io.h"
@@ -124,8 +124,7 @@ cv::Mat DrawAnalysis(const RgbdFrame& frame, const perception::FrameAnalysis& an
     std::string label = std::to_string(i) + " " + (tool.model.empty() ? "?" : tool.model);
     if (tool.status == perception::AnalysisStatus::kOk) {
       const Eigen::Vector3d half = tool.handle.axis * tool.handle.length / 2;
-      cv::line(bgr, project(tool.handle.center - half), project(tool.handle.center + half), cv::Scalar(255, 0, 255),
-               3);
+      cv::line(bgr, project(tool.handle.center - half), project(tool.handle.center + half), cv::Scalar(255, 0, 255), 3);
       cv::circle(bgr, project(tool.handle.center), 5, cv::Scalar(255, 0, 255), -1);
       label += fmt::format(" {:.0f}%", 100 * tool.confidence);
     }
@@ -365,8 +364,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       } else if (g.status == control::GraspStatus::kUnreachable) {
         // Thesis Fig. 5.20: point at the tool, open the hand, wait; a person puts it in the hand.
         const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
-        const control::HandOverResult h = control::HandOver(
-            robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
+        const control::HandOverResult h =
+            control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
               world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmHandleFrame(desc) * X_TH.inverse());
             });
         result.assisted = true;

@@ -12,22 +12,22 @@ namespace toolbench::app {
 
 /// What `toolbench episode` was asked to do.
 struct EpisodeRequest {
-  SceneRequest scene;               // seed, scene file, tools, cells, user tool folders
-  std::string action = "pull";      // the action on the ball; only "pull" is implemented
-  std::filesystem::path out_dir;    // result.json and images go here (created); empty = no files
-  bool video = false;               // write video.mp4 from the overview camera
-  bool quiet = false;               // no progress lines, no summary on stdout
-  bool noise = true;                // sensor noise model on
+  SceneRequest scene;             // seed, scene file, tools, cells, user tool folders
+  std::string action = "pull";    // the action on the ball; only "pull" is implemented
+  std::filesystem::path out_dir;  // result.json and images go here (created); empty = no files
+  bool video = false;             // write video.mp4 from the overview camera
+  bool quiet = false;             // no progress lines, no summary on stdout
+  bool noise = true;              // sensor noise model on
 };
 
 /// One stage of the episode (thesis Alg. 6).
 struct StageRecord {
-  std::string name;       // "observe_table", "perceive_tools", "grasp_tool", ...
+  std::string name;  // "observe_table", "perceive_tools", "grasp_tool", ...
   bool ok = false;
-  std::string outcome;    // short status ("found", "grasped", "unreachable", ...)
-  std::string reason;     // why not ok
-  double wall_ms = 0.0;   // wall time of the stage [ms]
-  double robot_s = 0.0;   // robot (simulated) time the stage took [s]
+  std::string outcome;   // short status ("found", "grasped", "unreachable", ...)
+  std::string reason;    // why not ok
+  double wall_ms = 0.0;  // wall time of the stage [ms]
+  double robot_s = 0.0;  // robot (simulated) time the stage took [s]
   nlohmann::json details = nlohmann::json::object();
 };
 
@@ -36,16 +36,16 @@ struct StageRecord {
 struct EpisodeResult {
   std::uint64_t seed = 0;
   std::vector<StageRecord> stages;
-  std::string chosen_tool;          // recognised model of the chosen tool ("" when none)
+  std::string chosen_tool;  // recognised model of the chosen tool ("" when none)
   int chosen_segment = -1;
-  bool ball_reachable_at_start = false;  // from perception + IK
-  bool assisted = false;            // a human handed the tool over (hand-over fallback)
-  bool grasp_success = false;       // truth: the chosen tool was lifted off the rack in the hand
-  bool pull_success = false;        // truth: the ball ended within reach
-  bool ball_grasp_success = false;  // truth: the ball was lifted >= 3 cm in the hand
+  bool ball_reachable_at_start = false;   // from perception + IK
+  bool assisted = false;                  // a human handed the tool over (hand-over fallback)
+  bool grasp_success = false;             // truth: the chosen tool was lifted off the rack in the hand
+  bool pull_success = false;              // truth: the ball ended within reach
+  bool ball_grasp_success = false;        // truth: the ball was lifted >= 3 cm in the hand
   double predicted_displacement_m = 0.0;  // what the choice expected the pull to bring [m]
   double achieved_displacement_m = 0.0;   // truth: ball moved toward the robot [m]
-  std::string failure;              // first failed stage: "<stage>: <reason>", empty on success
+  std::string failure;                    // first failed stage: "<stage>: <reason>", empty on success
   double wall_s = 0.0;
   double robot_s = 0.0;
   nlohmann::json truth = nlohmann::json::object();  // ground truth used for scoring

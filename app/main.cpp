@@ -6,17 +6,18 @@
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "app/bench.h"
 #include "app/capture.h"
-#include "app/perceive.h"
-#include "app/train_recognizer.h"
+#include "app/episode.h"
 #include "app/frame_io.h"
+#include "app/perceive.h"
 #include "app/scene_setup.h"
+#include "app/train_recognizer.h"
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
@@ -48,8 +49,7 @@ void AddSeedOption(CLI::App* cmd, std::uint64_t& seed) {
 /// Options shared by every command that builds a scene.
 void AddSceneOptions(CLI::App* cmd, app::SceneRequest& request) {
   AddSeedOption(cmd, request.seed);
-  cmd->add_option("--scene", request.scene_file,
-                  "Scene file (JSON); default: scenes/default.json in the source tree")
+  cmd->add_option("--scene", request.scene_file, "Scene file (JSON); default: scenes/default.json in the source tree")
       ->check(CLI::ExistingFile);
   cmd->add_option("--tools", request.tools,
                   "Tool models to put on the rack, comma-separated (default: 1-3 drawn from the seed)")
@@ -72,8 +72,7 @@ int RunRender(const app::SceneRequest& request, const std::filesystem::path& out
   app::WriteFrame(out_dir, capture.frame, app::CaptureMetadata(capture, request, options));
   WriteTextFile(out_dir / "ground_truth.json", app::GroundTruthJson(capture).dump(2) + "\n");
   WriteTextFile(out_dir / "scene.xml", capture.scene.composed.mjcf);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   spdlog::info("render: seed {}, {} tool(s), frame written to {} ({:.2f} s)", request.seed,
                capture.scene.composed.tools.size(), out_dir.string(), seconds);
   std::cout << out_dir.string() << "\n";
@@ -93,15 +92,13 @@ int RunScene(const app::SceneRequest& request, const std::filesystem::path& save
 }
 
 int RunToolsList(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& scene_file) {
-  const sim::SceneSpec spec =
-      sim::LoadSceneSpec(scene_file.empty() ? sim::DefaultScenePath() : scene_file);
+  const sim::SceneSpec spec = sim::LoadSceneSpec(scene_file.empty() ? sim::DefaultScenePath() : scene_file);
   const auto library = app::LoadLibraries(spec, dirs);
-  std::printf("%-14s %-8s %7s %7s %9s %6s %6s\n", "name", "family", "length", "mass", "handle_d",
-              "faces", "parts");
+  std::printf("%-14s %-8s %7s %7s %9s %6s %6s\n", "name", "family", "length", "mass", "handle_d", "faces", "parts");
   for (const auto& tool : library) {
-    std::printf("%-14s %-8s %6.3fm %5.3fkg %7.1fmm %6ld %6zu\n", tool.name.c_str(),
-                tool.family.c_str(), tool.total_length, tool.mass, 2000.0 * tool.handle.radius,
-                static_cast<long>(tool.mesh.faces.cols()), tool.collision.size());
+    std::printf("%-14s %-8s %6.3fm %5.3fkg %7.1fmm %6ld %6zu\n", tool.name.c_str(), tool.family.c_str(),
+                tool.total_length, tool.mass, 2000.0 * tool.handle.radius, static_cast<long>(tool.mesh.faces.cols()),
+                tool.collision.size());
   }
   return 0;
 }
@@ -118,41 +115,61 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
       ->capture_default_str();
 
+  app::EpisodeRequest episode_request;
+  CLI::App* episode = cli.add_subcommand(
+      "episode",
+      "One full episode (thesis Alg. 6), the default job: look at the table, find the ball; if it is out of "
+      "reach turn to the rack, perceive every tool, choose one, grasp its handle (hand-over when out of reach, "
+      "recorded as assisted), pull the ball, put the tool down, grasp the ball. Writes result.json, table.png, "
+      "rack.png (and video.mp4 with --video) to --out, a summary on stdout");
+  AddSceneOptions(episode, episode_request.scene);
+  episode->add_option("--action", episode_request.action, "Action on the ball")
+      ->check(CLI::IsMember({"pull", "drag-left", "drag-right", "push"}))
+      ->capture_default_str();
+  episode->add_option("--out", episode_request.out_dir, "Output folder (default: runs/episode-seed<N>)");
+  episode->add_flag("--video", episode_request.video, "Write video.mp4 from the overview camera (slower)");
+  episode->add_flag("--quiet", episode_request.quiet, "No progress lines and no summary (for scripts)");
+  episode->add_flag(
+      "--no-noise", [&](std::int64_t) { episode_request.noise = false; },
+      "Ideal images: switch the sensor noise model off");
+
   app::SceneRequest render_request;
   std::filesystem::path render_out;
   bool no_noise = false;
   std::string look = "rack";
   std::string camera = "helmet";
-  CLI::App* render = cli.add_subcommand(
-      "render", "Compose a scene, turn torso and head to the rack and write one RGB-D frame: "
-                "rgb.png, depth.png (uint16 mm), camera.json (intrinsics, X_RC from encoder FK), "
-                "cloud.ply (root frame), ground_truth.json, scene.xml");
+  CLI::App* render =
+      cli.add_subcommand("render",
+                         "Compose a scene, turn torso and head to the rack and write one RGB-D frame: "
+                         "rgb.png, depth.png (uint16 mm), camera.json (intrinsics, X_RC from encoder FK), "
+                         "cloud.ply (root frame), ground_truth.json, scene.xml");
   AddSceneOptions(render, render_request);
   render->add_option("--out", render_out, "Output folder (default: runs/render-seed<N>)");
   render->add_flag("--no-noise", no_noise, "Ideal images: switch the sensor noise model off");
   render->add_option("--look", look, "What to look at: rack or table")
       ->check(CLI::IsMember({"rack", "table"}))
       ->capture_default_str();
-  render->add_option("--camera", camera,
-                     "helmet (the robot's RGB-D sensor) or overview (a fixed third-person view "
-                     "for looking at the scene)")
+  render
+      ->add_option("--camera", camera,
+                   "helmet (the robot's RGB-D sensor) or overview (a fixed third-person view "
+                   "for looking at the scene)")
       ->check(CLI::IsMember({"helmet", "overview"}))
       ->capture_default_str();
 
   app::SceneRequest perceive_request;
   std::filesystem::path perceive_out;
   bool perceive_no_noise = false;
-  CLI::App* perceive = cli.add_subcommand(
-      "perceive", "Capture a frame of the rack (as render) and run perception on it: segments, "
-                  "object clouds, recognised models, fitted poses and handles (analysis.json, "
-                  "segments.png, tool_<i>.ply) and their score against ground truth (score.json)");
+  CLI::App* perceive =
+      cli.add_subcommand("perceive",
+                         "Capture a frame of the rack (as render) and run perception on it: segments, "
+                         "object clouds, recognised models, fitted poses and handles (analysis.json, "
+                         "segments.png, tool_<i>.ply) and their score against ground truth (score.json)");
   AddSceneOptions(perceive, perceive_request);
   perceive->add_option("--out", perceive_out, "Output folder (default: runs/perceive-seed<N>)");
   perceive->add_flag("--no-noise", perceive_no_noise, "Ideal images: switch the sensor noise model off");
   std::filesystem::path perceive_classifier = app::DefaultClassifierPath();
   bool perceive_no_classifier = false;
-  perceive->add_option("--classifier", perceive_classifier,
-                       "Tool classifier file (toolbench train-recognizer)")
+  perceive->add_option("--classifier", perceive_classifier, "Tool classifier file (toolbench train-recognizer)")
       ->capture_default_str();
   perceive->add_flag("--no-classifier", perceive_no_classifier,
                      "Recognise without the classifier: extent pre-selection and fit scores only");
@@ -169,8 +186,9 @@ int main(int argc, char** argv) {
   train->add_option("--scenes", train_request.scenes, "Training scenes")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  train->add_option("--heldout", train_request.heldout_scenes,
-                    "Held-out scenes, on seeds disjoint from the training ones (0 = scenes/4)")
+  train
+      ->add_option("--heldout", train_request.heldout_scenes,
+                   "Held-out scenes, on seeds disjoint from the training ones (0 = scenes/4)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   train->add_option("--trees", train_request.classifier.trees, "Trees in the forest")
@@ -180,26 +198,24 @@ int main(int argc, char** argv) {
 
   app::SceneRequest scene_request;
   std::filesystem::path scene_save;
-  CLI::App* scene = cli.add_subcommand(
-      "scene", "Compose a scene and write its MJCF, which MuJoCo (and its viewer) loads unchanged");
+  CLI::App* scene =
+      cli.add_subcommand("scene", "Compose a scene and write its MJCF, which MuJoCo (and its viewer) loads unchanged");
   AddSceneOptions(scene, scene_request);
   scene->add_option("--save", scene_save, "Where to write the MJCF")->required();
 
   std::vector<std::filesystem::path> list_dirs;
   std::filesystem::path list_scene;
-  CLI::App* tools = cli.add_subcommand(
-      "tools", "List the tool library (and check user tools: each mesh must be watertight, "
-               "outward-oriented, in metres)");
-  tools->add_option("--tool-dir", list_dirs, "Extra folder of user tools; repeatable")
-      ->check(CLI::ExistingDirectory);
-  tools->add_option("--scene", list_scene, "Scene file naming the library folders")
-      ->check(CLI::ExistingFile);
+  CLI::App* tools = cli.add_subcommand("tools",
+                                       "List the tool library (and check user tools: each mesh must be watertight, "
+                                       "outward-oriented, in metres)");
+  tools->add_option("--tool-dir", list_dirs, "Extra folder of user tools; repeatable")->check(CLI::ExistingDirectory);
+  tools->add_option("--scene", list_scene, "Scene file naming the library folders")->check(CLI::ExistingFile);
 
   app::BenchRequest bench_request;
   std::string shard = "0/1";
-  CLI::App* bench = cli.add_subcommand(
-      "bench", "Run a benchmark protocol; writes summary.json (and per-case results) to --out. "
-               "Failed cases are recorded with their reason, never dropped");
+  CLI::App* bench = cli.add_subcommand("bench",
+                                       "Run a benchmark protocol; writes summary.json (and per-case results) to --out. "
+                                       "Failed cases are recorded with their reason, never dropped");
   {
     std::string protocols;
     std::vector<std::string> names;
@@ -217,8 +233,12 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     bench->add_option("--filter", bench_request.filter,
                       "Only cases whose id matches this regular expression (ids: table53 'hoe_1/rot2')");
-    bench->add_option("--case-timeout", bench_request.case_timeout_s,
-                      "Kill a case running longer than this and record it as failed [s]")
+    bench->add_option("--episodes", bench_request.episodes, "Episode protocols (random): how many episodes")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    bench
+        ->add_option("--case-timeout", bench_request.case_timeout_s,
+                     "Kill a case running longer than this and record it as failed [s]")
         ->check(CLI::PositiveNumber)
         ->capture_default_str();
     bench->add_option("--jobs", bench_request.jobs, "Cases run at once, each in its own process")
@@ -256,6 +276,14 @@ int main(int argc, char** argv) {
       return RunRender(render_request, render_out, options);
     }
     if (scene->parsed()) return RunScene(scene_request, scene_save);
+    if (episode->parsed()) {
+      if (episode_request.out_dir.empty()) {
+        episode_request.out_dir = "runs/episode-seed" + std::to_string(episode_request.scene.seed);
+      }
+      const app::EpisodeResult result = app::RunEpisode(episode_request);
+      if (!episode_request.quiet) std::cout << app::EpisodeSummary(result) << episode_request.out_dir.string() << "\n";
+      return 0;
+    }
     if (perceive->parsed()) {
       if (perceive_out.empty()) perceive_out = "runs/perceive-seed" + std::to_string(perceive_request.seed);
       app::CaptureOptions options;

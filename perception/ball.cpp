@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "common/check.h"
+#include "common/rng.h"
 #include "perception/object_cloud.h"
 
 namespace toolbench::perception {
@@ -81,6 +82,38 @@ bool FitSphere(const Eigen::Matrix3Xd& points, Eigen::Vector3d& center, double& 
   return true;
 }
 
+namespace {
+
+/// Points of the largest subset that lies on one sphere of about the expected radius (RANSAC on
+/// 4-point spheres, fixed seed): the ball when a blob of its colour also holds something else
+/// (a red tool touching it). Empty when no such subset of at least 30 points exists.
+Eigen::Matrix3Xd SphereConsensus(const Eigen::Matrix3Xd& points, const BallDetectionOptions& options) {
+  const Eigen::Index n = points.cols();
+  if (n < 30) return {};
+  Rng rng(1);
+  const double inlier_distance = 0.003;
+  std::vector<Eigen::Index> best;
+  for (int iteration = 0; iteration < 400; ++iteration) {
+    Eigen::Matrix3Xd sample(3, 4);
+    for (int k = 0; k < 4; ++k) sample.col(k) = points.col(UniformInt(rng, 0, static_cast<int>(n) - 1));
+    Eigen::Vector3d c;
+    double r = 0, rms = 0;
+    if (!FitSphere(sample, c, r, rms)) continue;
+    if (std::fabs(r - options.expected_radius) > options.radius_tolerance * options.expected_radius) continue;
+    std::vector<Eigen::Index> inliers;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      if (std::fabs((points.col(i) - c).norm() - r) < inlier_distance) inliers.push_back(i);
+    }
+    if (inliers.size() > best.size()) best = std::move(inliers);
+  }
+  if (best.size() < 30) return {};
+  Eigen::Matrix3Xd out(3, static_cast<Eigen::Index>(best.size()));
+  for (size_t i = 0; i < best.size(); ++i) out.col(static_cast<Eigen::Index>(i)) = points.col(best[i]);
+  return out;
+}
+
+}  // namespace
+
 BallDetection DetectBall(const RgbdFrame& frame, const BallDetectionOptions& options) {
   options.Validate();
   if (frame.rgb.empty() || frame.rgb.type() != CV_8UC3) {
@@ -125,7 +158,29 @@ BallDetection DetectBall(const RgbdFrame& frame, const BallDetectionOptions& opt
                        stats.at<int>(label, cv::CC_STAT_WIDTH), stats.at<int>(label, cv::CC_STAT_HEIGHT));
     Eigen::Vector3d c_C;
     double radius = 0, rms = 0;
-    if (!FitSphere(p_C.cast<double>(), c_C, radius, rms)) {
+    Eigen::Matrix3Xd points = p_C.cast<double>();
+    bool fitted = FitSphere(points, c_C, radius, rms);
+    auto fits_ball = [&] {
+      return fitted &&
+             std::fabs(radius - options.expected_radius) / options.expected_radius <= options.radius_tolerance &&
+             rms <= options.max_rms_error;
+    };
+    if (!fits_ball()) {
+      // Something of the same colour may touch the ball: keep the points of the best sphere.
+      const Eigen::Matrix3Xd consensus = SphereConsensus(points, options);
+      if (consensus.cols() > 0) {
+        Eigen::Vector3d c2;
+        double r2 = 0, rms2 = 0;
+        if (FitSphere(consensus, c2, r2, rms2)) {
+          points = consensus;
+          c_C = c2;
+          radius = r2;
+          rms = rms2;
+          fitted = true;
+        }
+      }
+    }
+    if (!fitted) {
       rejections += Cat(rejections.empty() ? "" : "; ", "blob at (", roi.x, ", ", roi.y, "): no sphere fits its ",
                         p_C.cols(), " points");
       continue;
@@ -142,7 +197,7 @@ BallDetection DetectBall(const RgbdFrame& frame, const BallDetectionOptions& opt
       best.p_RB = frame.X_RC * c_C;
       best.radius = radius;
       best.rms_error = rms;
-      best.points = static_cast<int>(p_C.cols());
+      best.points = static_cast<int>(points.cols());
       best.roi = roi;
     }
   }

@@ -102,8 +102,10 @@ double Support(const toollib::ToolModel& tool, const Eigen::Matrix3d& R, const E
 }
 
 /// A distinct, saturated colour per tool (segmentation needs tools to stand out of the rack).
+/// No red: the ball is red, and a red tool lying against it would hide it from DetectBall's
+/// colour test.
 Eigen::Vector4d ToolColour(size_t index) {
-  static const double kPalette[][3] = {{0.85, 0.20, 0.15}, {0.15, 0.45, 0.85}, {0.95, 0.70, 0.10},
+  static const double kPalette[][3] = {{0.85, 0.20, 0.65}, {0.15, 0.45, 0.85}, {0.95, 0.70, 0.10},
                                        {0.20, 0.70, 0.30}, {0.60, 0.25, 0.75}, {0.95, 0.45, 0.10}};
   const auto& c = kPalette[index % 6];
   return {c[0], c[1], c[2], 1.0};

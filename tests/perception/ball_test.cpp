@@ -71,6 +71,21 @@ TEST(BallTest, DetectsTheBallInANoisyFrameAndMovesItToTheRootFrame) {
   EXPECT_GT(ball.points, 100);
 }
 
+TEST(BallTest, ABallTouchingARodOfTheSameColourIsStillFound) {
+  const Eigen::Vector3d c_C(0.0, 0.0, 0.7);
+  RgbdFrame frame = SphereFrame(c_C, 0.035, 0.0005, 3);
+  // A red rod lying against the ball, 2 cm thick, from its side to the image edge.
+  for (int v = 112; v < 128; ++v) {
+    for (int u = 0; u < 150; ++u) {
+      frame.rgb.at<cv::Vec3b>(v, u) = {230, 25, 25};
+      frame.depth.at<float>(v, u) = 0.72f;
+    }
+  }
+  const BallDetection ball = DetectBall(frame, {});
+  ASSERT_EQ(ball.status, BallStatus::kFound) << ball.reason;
+  EXPECT_LT((ball.p_RB - c_C).norm(), 0.003);
+}
+
 TEST(BallTest, WrongColourOrWrongSizeIsReportedWithAReason) {
   const BallDetection green = DetectBall(SphereFrame({0, 0, 0.7}, 0.035, 0.0, 1, {25, 230, 25}), {});
   EXPECT_EQ(green.status, BallStatus::kNotSeen);
