@@ -1,4 +1,5 @@
 // The command line: bad input gives a clear message and a non-zero exit, never a crash.
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -133,6 +134,43 @@ TEST(CliTest, Table53BenchScoresCasesAndWritesTheReport) {
   const CliRun m = Toolbench("merge " + dir.string() + " --out " + merged.string());
   ASSERT_EQ(m.code, 0) << m.output;
   EXPECT_TRUE(std::filesystem::exists(merged / "table53.md"));
+}
+
+TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
+  const auto dir = TempDir("episode");
+  const CliRun r = Toolbench("episode --seed 1 --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("episode seed 1"));
+  std::ifstream in(dir / "result.json");
+  const nlohmann::json result = nlohmann::json::parse(in);
+  for (const char* key : {"grasp_success", "pull_success", "ball_grasp_success", "assisted", "chosen_tool",
+                          "predicted_displacement_m", "achieved_displacement_m", "stages", "wall_s", "truth"}) {
+    EXPECT_TRUE(result.contains(key)) << key;
+  }
+  std::vector<std::string> stages;
+  for (const auto& s : result["stages"]) {
+    stages.push_back(s["name"]);
+    EXPECT_TRUE(s.contains("wall_ms") && s.contains("ok") && s.contains("outcome")) << s.dump();
+  }
+  ASSERT_GE(stages.size(), 2u);
+  EXPECT_EQ(stages[0], "observe_table");
+  EXPECT_EQ(stages[1], "check_reach");
+  // Seed 1's ball starts out of reach: the robot must have turned to the rack and chosen a tool.
+  if (!result["ball_reachable_at_start"].get<bool>()) {
+    EXPECT_NE(std::find(stages.begin(), stages.end(), "perceive_tools"), stages.end());
+    EXPECT_NE(std::find(stages.begin(), stages.end(), "choose_tool"), stages.end());
+    EXPECT_FALSE(result["chosen_tool"].get<std::string>().empty());
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "table.png"));
+}
+
+TEST(CliTest, EpisodeBadInputIsNamed) {
+  const CliRun unknown = Toolbench("episode --tools no_such_tool --out " + TempDir("episode_bad").string());
+  EXPECT_NE(unknown.code, 0);
+  EXPECT_THAT(unknown.output, HasSubstr("no_such_tool"));
+  const CliRun action = Toolbench("episode --action throw --out " + TempDir("episode_bad2").string());
+  EXPECT_NE(action.code, 0);
+  EXPECT_THAT(action.output, HasSubstr("throw"));
 }
 
 }  // namespace
