@@ -41,11 +41,14 @@ class FilmingRobot : public RobotInterface {
  public:
   FilmingRobot(sim::World& world, sim::SimRobot& robot) : world_(world), robot_(robot) {}
 
-  void StartFilming(sim::GlContext& gl, const std::filesystem::path& file, double fps) {
+  void StartFilming(const std::filesystem::path& file, double fps) {
     sim::RendererOptions options;
     options.camera = "overview";
     options.noise.enabled = false;
-    renderer_ = std::make_unique<sim::Renderer>(gl, world_, options);
+    // A GL context of its own: two MuJoCo render contexts in one GL context disturb each other's
+    // off-screen buffers (the robot's frames came out wrong).
+    gl_ = std::make_unique<sim::GlContext>();
+    renderer_ = std::make_unique<sim::Renderer>(*gl_, world_, options);
     const CameraIntrinsics& K = renderer_->intrinsics();
     writer_.open(file.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps, cv::Size(K.width, K.height));
     if (!writer_.isOpened()) ThrowInvalid("episode --video: cannot open '", file.string(), "' for writing (mp4v)");
@@ -64,8 +67,11 @@ class FilmingRobot : public RobotInterface {
       robot_.Wait(seconds);
       return;
     }
-    const double end = world_.time() + seconds;
-    while (world_.time() < end - 1e-9) {
+    // Exactly the steps World::Advance would take, in chunks between frames: filming must not
+    // change the physics.
+    const double dt = world_.timestep();
+    int remaining = std::max(0, static_cast<int>(std::ceil(seconds / dt - 1e-9)));
+    while (remaining > 0) {
       if (world_.time() >= next_frame_ - 1e-9) {
         const RgbdFrame frame = renderer_->Render(world_, 0);
         cv::Mat bgr;
@@ -73,13 +79,17 @@ class FilmingRobot : public RobotInterface {
         writer_.write(bgr);
         next_frame_ += period_;
       }
-      robot_.Wait(std::min(end, next_frame_) - world_.time());
+      const int chunk =
+          std::clamp(static_cast<int>(std::ceil((next_frame_ - world_.time()) / dt - 1e-9)), 1, remaining);
+      world_.Step(chunk);
+      remaining -= chunk;
     }
   }
 
  private:
   sim::World& world_;
   sim::SimRobot& robot_;
+  std::unique_ptr<sim::GlContext> gl_;  // declared before the renderer: destroyed after it
   std::unique_ptr<sim::Renderer> renderer_;
   cv::VideoWriter writer_;
   double period_ = 0.04;
@@ -170,13 +180,14 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
   // ---- Setup: scene, world, robot, eyes. ----
   LoadedScene scene = LoadScene(request.scene);
   if (scene.composed.tools.empty()) ThrowInvalid("episode: the rack is empty (no tool in the scene)");
+  // The GL context first: the renderers (the film's among them) must be destroyed before it.
+  sim::GlContext gl;
   sim::World world(scene.composed.mjcf, "episode seed " + std::to_string(request.scene.seed));
   sim::SimRobot sim_robot(world);
   FilmingRobot robot(world, sim_robot);
-  sim::GlContext gl;
   if (request.video) {
     if (request.out_dir.empty()) ThrowInvalid("episode --video needs --out");
-    robot.StartFilming(gl, request.out_dir / "video.mp4", 25.0);
+    robot.StartFilming(request.out_dir / "video.mp4", 25.0);
   }
   const robot::RobotDescription& desc = scene.robot;
   const sim::SceneSpec& spec = scene.spec;
@@ -300,6 +311,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                                       {"ms", analysis.times[i].total_ms}});
       }
       s.details["gaze_converged"] = look.gaze.converged;
+      if (!request.out_dir.empty()) {
+        cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, -1));
+        WriteFrame(request.out_dir / "rack_frame", rack_frame, nlohmann::json::object());
+      }
       s.ok = ok > 0;
       s.outcome = fmt::format("{}_of_{}_tools", ok, analysis.tools.size());
       if (!s.ok) s.reason = analysis.tools.empty() ? "no tool segmented" : analysis.tools.front().reason;
