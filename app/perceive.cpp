@@ -156,7 +156,12 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
       }
       t = Clock::now();
       cpu = ProcessCpuMs();
-      result = recognizer.Recognize(cloud.p_R, frame.X_RC.translation(), prior);
+      perception::FitView view;
+      view.depth = frame.depth;
+      view.mask = segment.mask;
+      view.intrinsics = frame.intrinsics;
+      view.X_RC = frame.X_RC;
+      result = recognizer.Recognize(cloud.p_R, frame.X_RC.translation(), prior, view);
       tool["ms"]["recognition_and_fit"] = Ms(t);
       tool["cpu_ms"]["recognition_and_fit"] = ProcessCpuMs() - cpu;
       tool["candidates"] = nlohmann::json::array();
@@ -175,6 +180,8 @@ int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_di
         tool["model"] = result.model;
         tool["confidence"] = result.confidence;
         tool["fit_error_m"] = result.fit.fit_error;
+        tool["view_turn"] = result.fit.view_turn;
+        tool["view_violation"] = result.fit.violation;
         tool["X_RT"] = PoseJson(result.fit.X_RT);
         tool["handle"] = {{"center_R", Vec3(result.fit.X_RT * model->handle.center)},
                           {"axis_R", Vec3(result.fit.X_RT.linear() * model->handle.axis)},

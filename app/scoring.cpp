@@ -63,6 +63,13 @@ CellScore ScoreCell(const perception::ToolAnalysis& analysis, const toollib::Too
     X_TT.translation() = Eigen::Vector3d(0, 0, true_model.total_length);
     truths.push_back(X_RT_true * X_TT);
   }
+  if (HasSymmetry(true_model, "rot_z_180")) {
+    // The same shape turned half about the handle axis: both working sides are right.
+    Eigen::Isometry3d X_TT = Eigen::Isometry3d::Identity();
+    X_TT.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const size_t count = truths.size();
+    for (size_t i = 0; i < count; ++i) truths.push_back(truths[i] * X_TT);
+  }
   for (size_t i = 0; i < truths.size(); ++i) {
     const CellScore s = ScoreAgainst(analysis, true_model, truths[i], options);
     if (i == 0 || s.score > best.score || (s.score == best.score && s.handle_error_m < best.handle_error_m)) {

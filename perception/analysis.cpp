@@ -47,6 +47,7 @@ AnalyzerOptions AnalyzerOptions::Thesis() {
   fit.euclidean_fitness_epsilon = 1e-6;
   fit.try_flips = false;
   fit.visible_rounds = 0;
+  fit.view_spin_steps = 0;  // no depth-image check of the turn about the handle
   options.cache_shapes = false;  // reconstruction, SDF and superquadrics for every tool, every time
   return options;
 }
@@ -184,7 +185,12 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
         times.classification_ms = Ms(t);
       }
       t = Clock::now();
-      recognition = impl_->recognizer->Recognize(cloud.p_R, p_R_camera, prior);
+      FitView view;
+      view.depth = frame.depth;
+      view.mask = segment.mask;
+      view.intrinsics = frame.intrinsics;
+      view.X_RC = frame.X_RC;
+      recognition = impl_->recognizer->Recognize(cloud.p_R, p_R_camera, prior, view);
       times.recognition_ms = Ms(t);
       if (recognition.status != FitStatus::kOk) {
         analysis.status = AnalysisStatus::kNoFit;

@@ -36,8 +36,8 @@ struct AnalyzerOptions {
   /// The thesis's configuration (chapter 4) as the baseline to compare against:
   /// point-to-point ICP with 500 iterations and the thesis's epsilons on 4000
   /// model points, principal-axes initialisation only (no flip candidates), no
-  /// visible-surface scoring rounds; parts, superquadrics and handle computed for every tool,
-  /// every time (no shape cache).
+  /// visible-surface scoring rounds, no depth-image check of the turn about the handle; parts,
+  /// superquadrics and handle computed for every tool, every time (no shape cache).
   static AnalyzerOptions Thesis();
 };
 

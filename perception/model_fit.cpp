@@ -240,6 +240,34 @@ void RequireFinite(const Eigen::Matrix3Xf& p_R, const char* function) {
   }
 }
 
+void RequireView(const std::optional<FitView>& view, const char* function) {
+  if (!view) return;
+  if (view->depth.empty() || view->depth.type() != CV_32FC1) {
+    ThrowInvalid(function, ": argument view.depth is ", view->depth.empty() ? "empty" : "not CV_32FC1",
+                 " (expected a CV_32FC1 depth image)");
+  }
+  if (view->mask.type() != CV_8UC1 || view->mask.size() != view->depth.size()) {
+    ThrowInvalid(function, ": argument view.mask is ", view->mask.cols, "x", view->mask.rows, " of type ",
+                 view->mask.type(), " (expected CV_8UC1 of the depth's size ", view->depth.cols, "x", view->depth.rows,
+                 ")");
+  }
+  const CameraIntrinsics& k = view->intrinsics;
+  if (k.width != view->depth.cols || k.height != view->depth.rows || !(k.fx > 0) || !(k.fy > 0)) {
+    ThrowInvalid(function, ": argument view.intrinsics is ", k.width, "x", k.height, " fx ", k.fx, " fy ", k.fy,
+                 " (expected the depth's size ", view->depth.cols, "x", view->depth.rows,
+                 " and positive focal lengths)");
+  }
+  if (!view->X_RC.matrix().allFinite()) ThrowInvalid(function, ": argument view.X_RC is not finite");
+}
+
+// Rigid motion of T onto itself: rotation by `angle` about the line through `pivot` along `axis`.
+Eigen::Isometry3d TurnAbout(const Eigen::Vector3d& pivot, const Eigen::Vector3d& axis, double angle) {
+  Eigen::Isometry3d M = Eigen::Isometry3d::Identity();
+  M.linear() = Eigen::AngleAxisd(angle, axis).toRotationMatrix();
+  M.translation() = pivot - M.linear() * pivot;
+  return M;
+}
+
 }  // namespace
 
 SurfaceSamples SampleSurface(const toollib::TriangleMesh& mesh, int count, std::uint64_t seed) {
@@ -321,6 +349,19 @@ void ModelFitOptions::Validate() const {
   if (score_model_points < kMinFitPoints) {
     ThrowInvalid(f, "score_model_points = ", score_model_points, " (expected >= ", kMinFitPoints, ")");
   }
+  if (view_spin_steps < 0 || view_spin_steps > 72) {
+    ThrowInvalid(f, "view_spin_steps = ", view_spin_steps, " (expected in [0, 72])");
+  }
+  if (view_points < kMinFitPoints) {
+    ThrowInvalid(f, "view_points = ", view_points, " (expected >= ", kMinFitPoints, ")");
+  }
+  if (view_refine_points < kMinFitPoints) {
+    ThrowInvalid(f, "view_refine_points = ", view_refine_points, " (expected >= ", kMinFitPoints, ")");
+  }
+  if (view_keep <= 0) ThrowInvalid(f, "view_keep = ", view_keep, " (expected > 0)");
+  if (view_iterations <= 0) ThrowInvalid(f, "view_iterations = ", view_iterations, " (expected > 0)");
+  if (!(view_free_distance > 0)) ThrowInvalid(f, "view_free_distance = ", view_free_distance, " (expected > 0)");
+  if (!(view_weight >= 0)) ThrowInvalid(f, "view_weight = ", view_weight, " (expected >= 0)");
 }
 
 void RecognitionOptions::Validate() const {
@@ -357,6 +398,10 @@ struct ModelFitter::Impl {
   Cloud::Ptr target;
   pcl::search::KdTree<Point>::Ptr target_tree;
   SurfaceSamples score_samples;  // evenly picked subset of `samples` for the unexplained fraction
+  Eigen::Vector3d handle_axis_T = Eigen::Vector3d::UnitZ();   // unit; the view check turns about it
+  Eigen::Vector3d handle_centre_T = Eigen::Vector3d::Zero();  // a point on that axis [m]
+  Eigen::Vector3d flip_pivot_T = Eigen::Vector3d::Zero();     // middle of the samples along the axis [m]
+  Eigen::Vector3d flip_axis_T = Eigen::Vector3d::UnitX();     // unit, perpendicular to the handle axis
 
   // The observed cloud in the forms a fit uses, built once per Search or Refine.
   struct Observation {
@@ -456,6 +501,54 @@ struct ModelFitter::Impl {
     }
     unexplained = visible > 0 ? static_cast<double>(missing) / visible : 0.0;
   }
+
+  // Mean distance observed point -> nearest model point for X_RT [m].
+  double MeanDistance(const Eigen::Matrix3Xf& observed, const Eigen::Isometry3d& X_RT) const {
+    const Eigen::Isometry3f X_TR = X_RT.inverse().cast<float>();
+    pcl::Indices index(1);
+    std::vector<float> sq_distance(1);
+    Point query;
+    query.getNormalVector3fMap() = Eigen::Vector3f::Zero();
+    double sum = 0.0;
+    for (Eigen::Index i = 0; i < observed.cols(); ++i) {
+      query.getVector3fMap() = X_TR * Eigen::Vector3f(observed.col(i));
+      target_tree->nearestKSearch(query, 1, index, sq_distance);
+      sum += std::sqrt(static_cast<double>(sq_distance[0]));
+    }
+    return sum / static_cast<double>(std::max<Eigen::Index>(observed.cols(), 1));
+  }
+
+  // Fraction of the camera-facing samples that the depth image contradicts at pose X_RT: the
+  // camera saw through them (observed depth clearly behind the predicted one) or they fall
+  // outside the tool's mask with nothing nearer hiding them. Samples hidden by a nearer observed
+  // surface (the tool's own far side, another tool) or outside the image are neutral: the image
+  // says nothing about them; inside the mask a missing return is a dropout, also neutral.
+  double ViewViolation(const FitView& view, const Eigen::Isometry3d& X_RT, const SurfaceSamples& model) const {
+    const Eigen::Isometry3d X_CT = view.X_RC.inverse() * X_RT;
+    const Eigen::Matrix3f R = X_CT.linear().cast<float>();
+    const Eigen::Vector3f t = X_CT.translation().cast<float>();
+    const Eigen::Vector3f p_T_camera = X_CT.inverse().translation().cast<float>();
+    const CameraIntrinsics& k = view.intrinsics;
+    const float free = static_cast<float>(options.view_free_distance);
+    int facing = 0;
+    int violated = 0;
+    for (Eigen::Index i = 0; i < model.points.cols(); ++i) {
+      const Eigen::Vector3f p_T = model.points.col(i);
+      if (model.normals.col(i).dot(p_T_camera - p_T) <= 0) continue;
+      const Eigen::Vector3f p_C = R * p_T + t;
+      if (p_C.z() <= 1e-3f) continue;
+      const long u = std::lround(k.fx * p_C.x() / p_C.z() + k.cx);
+      const long v = std::lround(k.fy * p_C.y() / p_C.z() + k.cy);
+      if (u < 0 || v < 0 || u >= view.depth.cols || v >= view.depth.rows) continue;
+      const float d = view.depth.at<float>(static_cast<int>(v), static_cast<int>(u));
+      const bool in_mask = view.mask.at<std::uint8_t>(static_cast<int>(v), static_cast<int>(u)) != 0;
+      const bool has_depth = std::isfinite(d) && d > 0.0f;
+      ++facing;
+      if (has_depth && d < p_C.z() - free) continue;
+      if (!in_mask || (has_depth && p_C.z() < d - free)) ++violated;
+    }
+    return facing > 0 ? static_cast<double>(violated) / facing : 1.0;
+  }
 };
 
 ModelFitter::ModelFitter(const toollib::ToolModel& model, const ModelFitOptions& options)
@@ -470,6 +563,13 @@ ModelFitter::ModelFitter(const toollib::ToolModel& model, const ModelFitOptions&
   impl_->target = ToPcl(impl_->samples.points, &impl_->samples.normals);
   impl_->target_tree = std::make_shared<pcl::search::KdTree<Point>>();
   impl_->target_tree->setInputCloud(impl_->target);
+  if (model.handle.axis.norm() > 0) impl_->handle_axis_T = model.handle.axis.normalized();
+  impl_->handle_centre_T = model.handle.center;
+  const Eigen::VectorXf along = impl_->handle_axis_T.cast<float>().transpose() *
+                                (impl_->samples.points.colwise() - impl_->handle_centre_T.cast<float>());
+  impl_->flip_pivot_T =
+      impl_->handle_centre_T + impl_->handle_axis_T * 0.5 * static_cast<double>(along.minCoeff() + along.maxCoeff());
+  impl_->flip_axis_T = impl_->handle_axis_T.unitOrthogonal();
   const Eigen::Index count = std::min<Eigen::Index>(options.score_model_points, impl_->samples.points.cols());
   impl_->score_samples.points.resize(3, count);
   impl_->score_samples.normals.resize(3, count);
@@ -489,11 +589,12 @@ const SurfaceSamples& ModelFitter::samples() const { return impl_->samples; }
 const std::string& ModelFitter::name() const { return impl_->name; }
 const Eigen::Vector3d& ModelFitter::principal_extents() const { return impl_->extents; }
 
-ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R,
-                                const std::optional<Eigen::Vector3d>& p_R_camera) const {
+ModelFitResult ModelFitter::Fit(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
+                                const std::optional<FitView>& view) const {
+  RequireView(view, "ModelFitter::Fit");
   ModelFitResult searched = Search(p_R, p_R_camera);
   if (searched.status != FitStatus::kOk) return searched;
-  return Refine(p_R, p_R_camera, std::move(searched));
+  return Refine(p_R, p_R_camera, std::move(searched), view);
 }
 
 ModelFitResult ModelFitter::Search(const Eigen::Matrix3Xf& p_R,
@@ -579,19 +680,20 @@ ModelFitResult ModelFitter::Search(const Eigen::Matrix3Xf& p_R,
 }
 
 ModelFitResult ModelFitter::Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
-                                   ModelFitResult searched) const {
+                                   ModelFitResult searched, const std::optional<FitView>& view) const {
+  RequireView(view, "ModelFitter::Refine");
   return RefineWith(p_R, p_R_camera, std::move(searched), impl_->options.max_observed_points,
-                    impl_->options.max_iterations, false);
+                    impl_->options.max_iterations, false, view ? &*view : nullptr);
 }
 
 ModelFitResult ModelFitter::Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
                                    ModelFitResult searched, int max_observed_points, int max_iterations) const {
-  return RefineWith(p_R, p_R_camera, std::move(searched), max_observed_points, max_iterations, true);
+  return RefineWith(p_R, p_R_camera, std::move(searched), max_observed_points, max_iterations, true, nullptr);
 }
 
 ModelFitResult ModelFitter::RefineWith(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
                                        ModelFitResult searched, int max_observed_points, int max_iterations,
-                                       bool own_loop) const {
+                                       bool own_loop, const FitView* view) const {
   RequireFinite(p_R, "ModelFitter::Refine");
   if (max_observed_points < kMinFitPoints) {
     ThrowInvalid("ModelFitter::Refine: argument max_observed_points = ", max_observed_points, " (expected >= ",
@@ -620,27 +722,84 @@ ModelFitResult ModelFitter::RefineWith(const Eigen::Matrix3Xf& p_R, const std::o
   // With the camera known, only the camera-facing model surface can have produced the points.
   // Matching against both faces lets a thin blade's far face pull the fit by its thickness,
   // so the final fit runs against the samples visible at the current pose, re-selected each round.
-  for (int round = 0; round < options.visible_rounds && p_R_camera; ++round) {
-    const Eigen::Vector3d p_T_camera = result.X_RT.inverse() * *p_R_camera;
-    std::vector<Eigen::Index> visible;
-    for (Eigen::Index i = 0; i < impl_->samples.points.cols(); ++i) {
-      const Eigen::Vector3d p = impl_->samples.points.col(i).cast<double>();
-      if (impl_->samples.normals.col(i).cast<double>().dot(p_T_camera - p) > 0) visible.push_back(i);
+  const auto visible_refine = [&](const Cloud::Ptr& source, int iterations, bool loop) {
+    for (int round = 0; round < options.visible_rounds && p_R_camera; ++round) {
+      const Eigen::Vector3d p_T_camera = result.X_RT.inverse() * *p_R_camera;
+      std::vector<Eigen::Index> visible;
+      for (Eigen::Index i = 0; i < impl_->samples.points.cols(); ++i) {
+        const Eigen::Vector3d p = impl_->samples.points.col(i).cast<double>();
+        if (impl_->samples.normals.col(i).cast<double>().dot(p_T_camera - p) > 0) visible.push_back(i);
+      }
+      if (static_cast<Eigen::Index>(visible.size()) < kMinFitPoints) break;
+      Eigen::Matrix3Xf points(3, static_cast<Eigen::Index>(visible.size()));
+      Eigen::Matrix3Xf normals(3, static_cast<Eigen::Index>(visible.size()));
+      for (std::size_t k = 0; k < visible.size(); ++k) {
+        points.col(static_cast<Eigen::Index>(k)) = impl_->samples.points.col(visible[k]);
+        normals.col(static_cast<Eigen::Index>(k)) = impl_->samples.normals.col(visible[k]);
+      }
+      const Cloud::Ptr visible_model = ToPcl(points, &normals);
+      auto visible_tree = std::make_shared<pcl::search::KdTree<Point>>();
+      visible_tree->setInputCloud(visible_model);
+      const Eigen::Isometry3d X_TR = impl_->RunIcpOn(visible_model, visible_tree, source, result.X_RT.inverse(),
+                                                     iterations, loop, result.converged);
+      result.X_RT = X_TR.inverse();
     }
-    if (static_cast<Eigen::Index>(visible.size()) < kMinFitPoints) break;
-    Eigen::Matrix3Xf points(3, static_cast<Eigen::Index>(visible.size()));
-    Eigen::Matrix3Xf normals(3, static_cast<Eigen::Index>(visible.size()));
-    for (std::size_t k = 0; k < visible.size(); ++k) {
-      points.col(static_cast<Eigen::Index>(k)) = impl_->samples.points.col(visible[k]);
-      normals.col(static_cast<Eigen::Index>(k)) = impl_->samples.normals.col(visible[k]);
+  };
+  visible_refine(o.source, max_iterations, own_loop);
+  if (view != nullptr && options.view_spin_steps > 0) {
+    // ICP cannot tell a blade seen edge-on from one turned by a few tens of degrees, or a rake's
+    // teeth towards the camera from away from it: the points fit both about equally. The depth
+    // image can: a wrong turn puts material where the camera saw through to the board, or
+    // outside the tool's silhouette. So every turn about the handle axis (and its end-to-end
+    // flip) is scored against the image, and the most promising few get a short ICP.
+    struct Hypothesis {
+      std::string label;
+      Eigen::Isometry3d X_RT;
+      double cost = 0.0;
+    };
+    const Eigen::Matrix3Xf ranked = EvenSubsample(o.coarse, options.view_points);
+    const auto cost = [&](const Eigen::Isometry3d& X_RT) {
+      return impl_->MeanDistance(ranked, X_RT) +
+             options.view_weight * impl_->ViewViolation(*view, X_RT, impl_->score_samples);
+    };
+    std::vector<Hypothesis> hypotheses;
+    const Eigen::Isometry3d base = result.X_RT;
+    for (int flip = 0; flip < 2; ++flip) {
+      for (int step = 0; step < options.view_spin_steps; ++step) {
+        const double angle = 2.0 * M_PI * step / options.view_spin_steps;
+        Eigen::Isometry3d M = TurnAbout(impl_->handle_centre_T, impl_->handle_axis_T, angle);
+        if (flip != 0) M = TurnAbout(impl_->flip_pivot_T, impl_->flip_axis_T, M_PI) * M;
+        Hypothesis h;
+        h.label = Cat(flip != 0 ? "flip_" : "spin_", std::lround(angle * 180.0 / M_PI));
+        h.X_RT = base * M;
+        h.cost = cost(h.X_RT);
+        hypotheses.push_back(std::move(h));
+      }
     }
-    const Cloud::Ptr visible_model = ToPcl(points, &normals);
-    auto visible_tree = std::make_shared<pcl::search::KdTree<Point>>();
-    visible_tree->setInputCloud(visible_model);
-    result.X_RT =
-        impl_->RunIcpOn(visible_model, visible_tree, o.source, result.X_RT.inverse(), max_iterations, own_loop,
-                        result.converged)
-            .inverse();
+    std::vector<std::size_t> order(hypotheses.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return hypotheses[a].cost < hypotheses[b].cost; });
+    // The ICP result (hypothesis 0) always stays in the race, as it is.
+    std::size_t winner = 0;
+    for (std::size_t k = 0; k < order.size() && k < static_cast<std::size_t>(options.view_keep); ++k) {
+      Hypothesis& h = hypotheses[order[k]];
+      if (order[k] != 0) {
+        bool converged = false;
+        h.X_RT = impl_->RunIcp(o.coarse_source, h.X_RT.inverse(), options.view_iterations, true, converged).inverse();
+        h.cost = cost(h.X_RT);
+      }
+      if (h.cost < hypotheses[winner].cost) winner = order[k];
+    }
+    internal::Logger()->debug("fit {}: view check keeps {} (cost {:.4f} m; ICP result {:.4f} m)", impl_->name,
+                              hypotheses[winner].label, hypotheses[winner].cost, hypotheses[0].cost);
+    result.view_turn = hypotheses[winner].label;
+    if (winner != 0) {
+      result.X_RT = hypotheses[winner].X_RT;
+      // A short refinement on a subset: the turn is settled, the few mm left need no 2000 points.
+      visible_refine(ToPcl(EvenSubsample(o.observed, options.view_refine_points)), options.view_iterations, true);
+    }
+    result.violation = impl_->ViewViolation(*view, result.X_RT, impl_->samples);
   }
   result.iterations = max_iterations;
   impl_->Score(o.observed, p_R_camera ? &o.tree : nullptr, p_R_camera, result.X_RT, impl_->samples, result.fit_error,
@@ -685,8 +844,10 @@ std::vector<std::string> ToolRecognizer::model_names() const {
 
 RecognitionResult ToolRecognizer::Recognize(const Eigen::Matrix3Xf& p_R,
                                             const std::optional<Eigen::Vector3d>& p_R_camera,
-                                            const std::vector<double>& prior) const {
+                                            const std::vector<double>& prior,
+                                            const std::optional<FitView>& view) const {
   RequireFinite(p_R, "ToolRecognizer::Recognize");
+  RequireView(view, "ToolRecognizer::Recognize");
   const std::size_t n = impl_->fitters.size();
   const RecognitionOptions& options = impl_->options;
   if (!prior.empty()) {
@@ -791,7 +952,7 @@ RecognitionResult ToolRecognizer::Recognize(const Eigen::Matrix3Xf& p_R,
     if (s.fitted) s.posterior = normaliser > 0 ? s.posterior / normaliser : 0.0;
   }
   const auto refine_start = std::chrono::steady_clock::now();
-  result.fit = impl_->fitters[best].Refine(p_R, p_R_camera, std::move(searched[best]));
+  result.fit = impl_->fitters[best].Refine(p_R, p_R_camera, std::move(searched[best]), view);
   const auto refine_end = std::chrono::steady_clock::now();
   result.status = FitStatus::kOk;
   result.model = result.fit.model;

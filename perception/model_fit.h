@@ -8,7 +8,9 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <opencv2/core.hpp>
 
+#include "common/types.h"
 #include "toollib/mesh.h"
 #include "toollib/tool_model.h"
 
@@ -75,7 +77,34 @@ struct ModelFitOptions {
   int score_model_points = 1000;           // model samples (an even subset of model_points) whose
                                            // visibility scores each candidate of the search; the
                                            // final score uses all of them, >= 10
+  // Depth-image check of the turn about the handle axis (needs a FitView; the thesis baseline
+  // has none: view_spin_steps = 0). After the final ICP the fitted model is turned about its
+  // handle axis every 360 / view_spin_steps deg, each turn also flipped end to end, and every
+  // hypothesis is scored against the depth image; the view_keep best get a short ICP, and the
+  // winner, when it is not the ICP result, is refined again.
+  int view_spin_steps = 24;                // turns tried, in [0, 72]; 0 = no depth-image check
+  int view_points = 150;                   // observed points (an even subset) whose distance to
+                                           // the model ranks the hypotheses, >= 10
+  int view_keep = 4;                       // hypotheses refined after the ranking, > 0
+  int view_iterations = 15;                // ICP cap of each of those refinements and of each
+                                           // round of the winner's re-refinement, > 0
+  int view_refine_points = 600;            // observed points (an even subset) of the winner's
+                                           // re-refinement against its visible samples, >= 10
+  double view_free_distance = 0.01;        // a model sample this much in front of the observed
+                                           // depth is a free-space violation [m], > 0
+  double view_weight = 0.02;               // hypothesis cost = mean observed-to-model distance +
+                                           // view_weight * violated fraction [m per unit], >= 0
   void Validate() const;                   // throws std::invalid_argument naming the field
+};
+
+/// What the camera saw of one tool: lets the fit check a pose against the depth image itself
+/// (free space the camera saw through, pixels outside the tool's mask), which the cloud alone
+/// cannot tell (ModelFitOptions::view_spin_steps).
+struct FitView {
+  cv::Mat depth;                                           // CV_32FC1 [m] along the optical axis, 0 = no return
+  cv::Mat mask;                                            // CV_8UC1 of depth's size, non-zero = this tool
+  CameraIntrinsics intrinsics;                             // of `depth`; width and height must match it
+  Eigen::Isometry3d X_RC = Eigen::Isometry3d::Identity();  // camera (OpenCV frame) in R
 };
 
 /// Outcome class of a fit (an expected failure is a result, not an exception).
@@ -115,6 +144,12 @@ struct ModelFitResult {
   int iterations = 0;      // ICP iteration cap used by the final fit
   std::vector<FitCandidate> candidates;  // every initial guess, in the order tried
   int best_candidate = -1;               // index into `candidates` the final fit started from
+  // With a view check: the winning turn about the handle axis ("spin_<deg>", "flip_<deg>";
+  // "spin_0" = the ICP result kept); else empty.
+  std::string view_turn;
+  // With a view check: fraction of the camera-facing model samples the depth image
+  // contradicts (seen through, or outside the mask) at X_RT, in [0, 1]; else 0.
+  double violation = 0.0;
 };
 
 /// Fits one library model to observed clouds. Construction samples the model
@@ -140,9 +175,13 @@ class ModelFitter {
   /// `p_R_camera`, when given, is the camera centre in R; it lets the score count the
   /// camera-facing model surface the observation does not explain (a partial cloud otherwise
   /// fits inside any larger model). Returns kTooFewPoints with a reason for fewer than
-  /// kMinFitPoints points. Throws std::invalid_argument when `p_R` has a non-finite entry.
-  ModelFitResult Fit(const Eigen::Matrix3Xf& p_R,
-                     const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt) const;
+  /// kMinFitPoints points. `view`, when given (and view_spin_steps > 0), checks the turn about
+  /// the handle axis against the depth image after the final ICP (see ModelFitOptions).
+  /// Throws std::invalid_argument when `p_R` has a non-finite entry, or for a `view` whose
+  /// depth is empty or not CV_32FC1, whose mask is not CV_8UC1 of the depth's size, or whose
+  /// intrinsics do not match the depth or have non-positive focal lengths.
+  ModelFitResult Fit(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt,
+                     const std::optional<FitView>& view = std::nullopt) const;
 
   /// The first stage of Fit alone: every initial candidate with the short ICP (coarse_points,
   /// coarse_iterations; screened first when screen_iterations > 0), scored. X_RT, fit_error,
@@ -153,15 +192,17 @@ class ModelFitter {
 
   /// The second stage of Fit: the full ICP (and visible-surface rounds) from the pose X_RT of
   /// `searched`, which must be a kOk Search (or Refine) result of this fitter on the same `p_R`
-  /// and `p_R_camera`. Fit(p, c) == Refine(p, c, Search(p, c)). Throws std::invalid_argument for
-  /// a `searched` of another model or not kOk, fewer than kMinFitPoints or non-finite points.
+  /// and `p_R_camera`, then the depth-image check when `view` is given.
+  /// Fit(p, c, v) == Refine(p, c, Search(p, c), v). Throws std::invalid_argument for a
+  /// `searched` of another model or not kOk, fewer than kMinFitPoints or non-finite points, or
+  /// a bad `view` (see Fit).
   ModelFitResult Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
-                        ModelFitResult searched) const;
+                        ModelFitResult searched, const std::optional<FitView>& view = std::nullopt) const;
 
   /// Refine with other limits than the options': at most `max_observed_points` (>= 10) observed
   /// points and `max_iterations` (> 0) ICP iterations per round (ToolRecognizer verifies
-  /// candidate models with a light refinement). Throws std::invalid_argument also for limits
-  /// out of range.
+  /// candidate models with a light refinement); never runs the depth-image check. Throws
+  /// std::invalid_argument also for limits out of range.
   ModelFitResult Refine(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
                         ModelFitResult searched, int max_observed_points, int max_iterations) const;
 
@@ -175,8 +216,8 @@ class ModelFitter {
  private:
   // The Refine overloads: own_loop selects our ICP loop (verification) or PCL's (final fit).
   ModelFitResult RefineWith(const Eigen::Matrix3Xf& p_R, const std::optional<Eigen::Vector3d>& p_R_camera,
-                            ModelFitResult searched, int max_observed_points, int max_iterations,
-                            bool own_loop) const;
+                            ModelFitResult searched, int max_observed_points, int max_iterations, bool own_loop,
+                            const FitView* view) const;
 
   struct Impl;
   std::unique_ptr<Impl> impl_;
@@ -244,9 +285,12 @@ class ToolRecognizer {
   /// for a cloud too small to fit; throws std::invalid_argument for non-finite points.
   /// `prior`, when not empty, is a probability per library model (library order, >= 0).
   /// Throws std::invalid_argument also for a prior of the wrong length or a negative entry.
+  /// `view`, when given, reaches the winner's full refinement (ModelFitter::Refine; the
+  /// candidates' verification does not use it); a bad view throws as in ModelFitter::Fit.
   RecognitionResult Recognize(const Eigen::Matrix3Xf& p_R,
                               const std::optional<Eigen::Vector3d>& p_R_camera = std::nullopt,
-                              const std::vector<double>& prior = {}) const;
+                              const std::vector<double>& prior = {},
+                              const std::optional<FitView>& view = std::nullopt) const;
 
   /// The library model names, in library order (the order a prior must follow).
   std::vector<std::string> model_names() const;

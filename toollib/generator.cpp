@@ -801,6 +801,9 @@ std::optional<ToolModel> MakeSpatula(const SpatulaParams& p, int index, int atte
   d.params["blade_length"] = p.blade_length;
   d.params["blade_tilt"] = Deg(p.tilt);
   d.params["shank_length"] = p.shank_length;
+  // Untilted, the spatula is boxes and a cylinder centred on the handle axis: turned half about
+  // it, it is the same shape, so its working side cannot be told from the shape.
+  if (p.tilt == 0.0) d.symmetries.push_back("rot_z_180");
   return Finish(std::move(d));
 }
 

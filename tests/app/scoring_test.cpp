@@ -90,6 +90,14 @@ TEST(ScoreCellTest, EndToEndFlipScoresHalfUnlessTheShapeIsSymmetric) {
   stick.symmetries = {"rot_z_any", "rot_x_180"};
   const CellScore st = ScoreCell(Analysis(stick, flipped), stick, X, "stick");
   EXPECT_EQ(st.score, 1.0) << st.verdict;
+  // A shape that is the same turned half about its handle (an untilted spatula): either side.
+  Eigen::Isometry3d half = Eigen::Isometry3d::Identity();
+  half.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  EXPECT_EQ(ScoreCell(Analysis(hoe, X * half), hoe, X, "hoe").verdict, "effector_wrong_side");
+  auto spatula = hoe;
+  spatula.symmetries = {"mirror_y", "rot_z_180"};
+  const CellScore sp = ScoreCell(Analysis(spatula, X * half), spatula, X, "spatula");
+  EXPECT_EQ(sp.score, 1.0) << sp.verdict;
 }
 
 TEST(ScoreCellTest, FailedAnalysisScoresZeroAndWrongModelIsNotRecognised) {

@@ -204,6 +204,161 @@ TEST_F(ModelFitTest, BadInput) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("classifier_mass = 1.5")));
 }
 
+// A depth image of one tool in front of a board, z-buffered from dense surface samples (not the
+// fitter's: other seed), with the tool's mask and its back-projected cloud in R.
+struct RenderedView {
+  FitView view;
+  Eigen::Matrix3Xf p_R;  // the masked pixels back-projected to R [m]
+};
+
+constexpr double kBoardDepth = 0.75;  // board behind the tool, perpendicular to the optical axis [m]
+
+Eigen::Isometry3d CameraPose() {
+  Eigen::Isometry3d X_RC = Eigen::Isometry3d::Identity();
+  X_RC.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
+  X_RC.translation() = Eigen::Vector3d(0.1, -0.2, 0.3);
+  return X_RC;
+}
+
+RenderedView Render(const toollib::ToolModel& tool, const Eigen::Isometry3d& X_RT) {
+  RenderedView out;
+  FitView& v = out.view;
+  v.intrinsics = CameraIntrinsics{200, 200, 320.0, 320.0, 99.5, 99.5};
+  v.X_RC = CameraPose();
+  v.depth = cv::Mat(200, 200, CV_32FC1, cv::Scalar(kBoardDepth));
+  v.mask = cv::Mat::zeros(200, 200, CV_8UC1);
+  const SurfaceSamples dense = SampleSurface(tool.mesh, 80000, 77);
+  const Eigen::Isometry3d X_CT = v.X_RC.inverse() * X_RT;
+  for (Eigen::Index i = 0; i < dense.points.cols(); ++i) {
+    const Eigen::Vector3d p_C = X_CT * dense.points.col(i).cast<double>();
+    const long u = std::lround(320.0 * p_C.x() / p_C.z() + 99.5);
+    const long r = std::lround(320.0 * p_C.y() / p_C.z() + 99.5);
+    if (u < 0 || r < 0 || u >= 200 || r >= 200) continue;
+    float& d = v.depth.at<float>(static_cast<int>(r), static_cast<int>(u));
+    if (p_C.z() < d) {
+      d = static_cast<float>(p_C.z());
+      v.mask.at<std::uint8_t>(static_cast<int>(r), static_cast<int>(u)) = 255;
+    }
+  }
+  std::vector<Eigen::Vector3f> points;
+  for (int r = 0; r < 200; ++r) {
+    for (int u = 0; u < 200; ++u) {
+      if (v.mask.at<std::uint8_t>(r, u) == 0) continue;
+      const double z = v.depth.at<float>(r, u);
+      const Eigen::Vector3d p_C((u - 99.5) * z / 320.0, (r - 99.5) * z / 320.0, z);
+      points.push_back((v.X_RC * p_C).cast<float>());
+    }
+  }
+  out.p_R.resize(3, static_cast<Eigen::Index>(points.size()));
+  for (std::size_t i = 0; i < points.size(); ++i) out.p_R.col(static_cast<Eigen::Index>(i)) = points[i];
+  return out;
+}
+
+// Angle between the fitted and the true working direction x_T [rad].
+double EffectorError(const Eigen::Isometry3d& fit, const Eigen::Isometry3d& truth) {
+  return std::acos(std::clamp(fit.linear().col(0).dot(truth.linear().col(0)), -1.0, 1.0));
+}
+
+// Tool in the camera's view at 0.55 m, handle along the image's vertical, turned by `spin` about
+// its handle (0: the effector's working side x_T faces the camera).
+Eigen::Isometry3d ToolInView(const toollib::ToolModel& tool, double spin) {
+  Eigen::Isometry3d X_CT = Eigen::Isometry3d::Identity();
+  // z_T along -y_C (up in the image), x_T towards the camera (-z_C), then the spin about z_T.
+  Eigen::Matrix3d R;
+  R.col(0) = -Eigen::Vector3d::UnitZ();
+  R.col(2) = -Eigen::Vector3d::UnitY();
+  R.col(1) = R.col(2).cross(R.col(0));
+  X_CT.linear() = R * Eigen::AngleAxisd(spin, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+                  Eigen::AngleAxisd(0.15, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  X_CT.translation() = Eigen::Vector3d(0.0, 0.0, 0.55) - X_CT.linear() * tool.handle.center;
+  return CameraPose() * X_CT;
+}
+
+TEST(ModelFitViewTest, DepthImageRecoversTheTurnAboutTheHandle) {
+  constexpr double kEffectorTol = 15.0 * M_PI / 180.0;
+  constexpr double kWrongSide = 60.0 * M_PI / 180.0;  // the Table 5.3 scoring's limit
+  ModelFitOptions checked_options;
+  checked_options.model_points = 1500;  // fewer points than the defaults keep this test fast
+  checked_options.max_observed_points = 500;
+  checked_options.max_iterations = 60;
+  ModelFitOptions plain_options = checked_options;
+  plain_options.view_spin_steps = 0;
+  int stuck_cases = 0;
+  // Effector facing the camera (0), seen from the side (90: the hoe's blade edge-on), from
+  // behind (180: the rake's teeth away from the camera), at 135 deg.
+  const std::vector<std::pair<std::string, std::vector<double>>> cases = {{"hoe_1", {0.0, 90.0, 135.0}},
+                                                                          {"rake_2", {0.0, 180.0}}};
+  for (const auto& [name, spins] : cases) {
+    const toollib::ToolModel tool = LoadTool(name);
+    const ModelFitter plain(tool, plain_options);
+    const ModelFitter checked(tool, checked_options);
+    for (const double spin_deg : spins) {
+      const Eigen::Isometry3d X_RT = ToolInView(tool, spin_deg * M_PI / 180.0);
+      const RenderedView seen = Render(tool, X_RT);
+      ASSERT_GT(seen.p_R.cols(), 200) << name;
+      const Eigen::Vector3d camera = seen.view.X_RC.translation();
+      const ModelFitResult fit = checked.Fit(seen.p_R, camera, seen.view);
+      ASSERT_EQ(fit.status, FitStatus::kOk) << fit.reason;
+      EXPECT_LT(EffectorError(fit.X_RT, X_RT), kEffectorTol) << name << " spin " << spin_deg << " " << fit.view_turn;
+      EXPECT_LT((fit.X_RT * tool.handle.center - X_RT * tool.handle.center).norm(), 0.01) << name << " " << spin_deg;
+      EXPECT_GT(fit.violation, -1e-12);
+      EXPECT_LT(fit.violation, 0.2) << name << " " << spin_deg;
+
+      // The final fit started a quarter or half turn about the handle off the truth: ICP alone
+      // often stays there (the points fit about as well); the depth image check turns it back.
+      ModelFitResult start = checked.Search(seen.p_R, camera);
+      ASSERT_EQ(start.status, FitStatus::kOk);
+      for (const double off_deg : {90.0, 180.0}) {
+        start.X_RT.linear() = X_RT.linear() * Eigen::AngleAxisd(off_deg * M_PI / 180, Eigen::Vector3d::UnitZ());
+        start.X_RT.translation() = X_RT * tool.handle.center - start.X_RT.linear() * tool.handle.center;
+        ModelFitResult plain_start = start;
+        const ModelFitResult stuck = plain.Refine(seen.p_R, camera, plain_start, seen.view);
+        EXPECT_TRUE(stuck.view_turn.empty());  // view_spin_steps = 0: no check
+        const ModelFitResult fixed = checked.Refine(seen.p_R, camera, start, seen.view);
+        EXPECT_LT(EffectorError(fixed.X_RT, X_RT), kEffectorTol)
+            << name << " spin " << spin_deg << " off " << off_deg << " " << fixed.view_turn;
+        if (EffectorError(stuck.X_RT, X_RT) > kWrongSide) {
+          ++stuck_cases;
+          EXPECT_NE(fixed.view_turn, "spin_0") << name << " spin " << spin_deg << " off " << off_deg;
+        }
+      }
+    }
+  }
+  EXPECT_GE(stuck_cases, 3) << "too few cases where ICP alone keeps the wrong turn: " << stuck_cases;
+}
+
+TEST(ModelFitViewTest, RejectsBadView) {
+  const toollib::ToolModel tool = LoadTool("hoe_1");
+  ModelFitOptions options;
+  options.model_points = 500;
+  const ModelFitter fitter(tool, options);
+  const RenderedView seen = Render(tool, ToolInView(tool, 0.0));
+  const Eigen::Vector3d camera = seen.view.X_RC.translation();
+  FitView bad = seen.view;
+  bad.mask = cv::Mat::zeros(100, 200, CV_8UC1);
+  EXPECT_THAT([&] { fitter.Fit(seen.p_R, camera, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("ModelFitter::Fit: argument view.mask is 200x100")));
+  bad = seen.view;
+  bad.depth = cv::Mat::zeros(200, 150, CV_32FC1);
+  EXPECT_THAT([&] { fitter.Fit(seen.p_R, camera, bad); }, ThrowsMessage<std::invalid_argument>(HasSubstr("view.mask")));
+  bad = seen.view;
+  bad.depth = cv::Mat::zeros(200, 200, CV_16UC1);
+  EXPECT_THAT([&] { fitter.Fit(seen.p_R, camera, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("view.depth is not CV_32FC1")));
+  bad = seen.view;
+  bad.intrinsics.width = 640;
+  EXPECT_THAT([&] { fitter.Fit(seen.p_R, camera, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("view.intrinsics is 640x200")));
+  const ToolRecognizer recognizer({tool}, RecognitionOptions{});
+  bad = seen.view;
+  bad.mask = cv::Mat();
+  EXPECT_THAT([&] { recognizer.Recognize(seen.p_R, camera, {}, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("ToolRecognizer::Recognize: argument view.mask")));
+  ModelFitOptions bad_options;
+  bad_options.view_spin_steps = -1;
+  EXPECT_THAT([&] { bad_options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("view_spin_steps = -1")));
+}
+
 TEST(ToolRecognizerTest, PicksTheObservedModel) {
   const std::vector<toollib::ToolModel> library = {LoadTool("hoe_2"), LoadTool("rake_1"), LoadTool("hook_3")};
   RecognitionOptions options;
