@@ -41,6 +41,16 @@ control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
     if (d.norm() <= region) reach = std::max(reach, d.dot(e.direction_T));
   }
   e.half_thickness_m = reach;
+  // The geometry the pull plans with: the effector region's vertices and the whole mesh.
+  std::vector<Eigen::Index> near;
+  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
+    if ((model.mesh.vertices.col(v).cast<double>() - e.center_T).norm() <= region) near.push_back(v);
+  }
+  e.points_T.resize(3, static_cast<Eigen::Index>(near.size()));
+  for (size_t i = 0; i < near.size(); ++i) {
+    e.points_T.col(static_cast<Eigen::Index>(i)) = model.mesh.vertices.col(near[i]).cast<double>();
+  }
+  e.tool_points_T = model.mesh.vertices.cast<double>();
   return e;
 }
 
@@ -235,6 +245,9 @@ int RunPullBench(const BenchRequest& request) {
                            {"pull_yaw_deg", r.pull.yaw_rad * 180 / M_PI},
                            {"pull_roll_deg", r.pull.roll_rad * 180 / M_PI},
                            {"pull_candidates_feasible", r.pull.candidates_feasible},
+                           {"pull_candidates_blocked", r.pull.candidates_blocked},
+                           {"pull_start_distance_m", r.pull.start_distance_m},
+                           {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
                            {"put_down", r.put_down},
                            {"ball_grasp_tried", r.ball_grasp_tried},
                            {"ball_grasped", r.ball_grasped},

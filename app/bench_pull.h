@@ -13,12 +13,11 @@ namespace toolbench::app {
 /// How one ground-truth pull case runs and is judged.
 struct PullCaseOptions {
   std::string cell = "rot0";        // rack cell of the tool (Table 5.3 name)
-  /// Ball centre range (x, then y, in R) drawn from the case seed, replacing the scene's: where
-  /// the tool pull can start behind it. The scene's own range (x -0.62..-0.56) is at the very edge
-  /// of the arm's reach, and the effector must start 8-10 cm further out, which no palm
-  /// orientation of the held tool reached in our tests (IK 7-20 mm short).
-  Eigen::Vector2d ball_x_range{-0.56, -0.50};
-  Eigen::Vector2d ball_y_range{-0.06, 0.06};
+  /// Ball centre range (x, then y, in R) drawn from the case seed, replacing the scene's [m]: as
+  /// in scenes/default.json, just out of the arm's reach (BallInReach is false for x <= -0.60 at
+  /// every y in the range; a top grasp reaches x = -0.59), so the pull must bring it closer.
+  Eigen::Vector2d ball_x_range{-0.62, -0.60};
+  Eigen::Vector2d ball_y_range{-0.10, 0.05};
   double settle_after_s = 1.0;      // wait after the pull before measuring the ball [s], > 0
   double min_lift_m = 0.05;         // the grasp must lift the tool this far (grasp-gt criterion) [m], > 0
   /// After the pull: put the tool down on the table at put_down_R (x, y in R; z = table top) and,

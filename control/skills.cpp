@@ -501,6 +501,12 @@ void PullOptions::Validate() const {
   if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
   if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
   if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
+  if (!(support_clearance_m >= 0)) fail("support_clearance_m", support_clearance_m, ">= 0");
+  if (!(start_step_m > 0)) fail("start_step_m", start_step_m, "> 0");
+  if (!(max_start_distance_m > 0)) fail("max_start_distance_m", max_start_distance_m, "> 0");
+  if (!(min_palm_height_m >= 0)) fail("min_palm_height_m", min_palm_height_m, ">= 0");
+  if (!(start_tolerance_m >= 0)) fail("start_tolerance_m", start_tolerance_m, ">= 0");
+  if (!(left_arm_clearance_m >= 0)) fail("left_arm_clearance_m", left_arm_clearance_m, ">= 0");
   if (!(min_elevation_rad >= -M_PI / 2 && min_elevation_rad <= max_elevation_rad)) {
     fail("min_elevation_rad", min_elevation_rad, "in [-pi/2, max_elevation_rad]");
   }
@@ -555,6 +561,13 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   if (!(effector.half_thickness_m >= 0)) {
     ThrowInvalid("PullObject: effector.half_thickness_m = ", effector.half_thickness_m, " (expected >= 0)");
   }
+  if (!effector.points_T.allFinite() || !effector.tool_points_T.allFinite()) {
+    ThrowInvalid("PullObject: effector.points_T or effector.tool_points_T holds non-finite points");
+  }
+  if ((effector.points_T.cols() > 0) != (effector.tool_points_T.cols() > 0)) {
+    ThrowInvalid("PullObject: effector.points_T has ", effector.points_T.cols(), " points, tool_points_T ",
+                 effector.tool_points_T.cols(), " (expected both or neither)");
+  }
   RequireHandJoints(robot, desc, "PullObject");
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
@@ -563,6 +576,12 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   screen_options.presolve_restarts = options.screening_restarts;
   screen_options.max_iterations = options.screening_ipopt_iterations;
   CartesianSolver screen(chain, desc.HomeQ(), screen_options);
+  IkOptions loose_options = screen_options;
+  loose_options.position_tolerance_m = std::max(options.ik.position_tolerance_m, options.start_tolerance_m);
+  CartesianSolver loose_screen(chain, desc.HomeQ(), loose_options);
+  loose_options.presolve_restarts = options.ik.presolve_restarts;
+  loose_options.max_iterations = options.ik.max_iterations;
+  CartesianSolver start_solver(chain, desc.HomeQ(), loose_options);
   const std::vector<std::string> names = robot.JointNames();
   const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
   const Eigen::Isometry3d X_TP = X_PT.inverse();
@@ -576,6 +595,20 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     return result;
   }
   u_straight.normalize();
+  const bool geometric = effector.points_T.cols() > 0 && effector.tool_points_T.cols() > 0;
+  const double support_z = p_RO.z() - object_radius;
+  std::vector<KinematicChain> left_arm;  // root -> each fixed left-arm link (torso joints only)
+  for (const std::string& link : options.left_arm_links) left_arm.emplace_back(desc.model, desc.root_link, link);
+  // True when the posture keeps the fixed left arm above the support (the table).
+  auto left_arm_clear = [&](const Eigen::VectorXd& q) {
+    for (const KinematicChain& c : left_arm) {
+      if (c.TipPose(q).translation().z() < support_z + options.left_arm_clearance_m) return false;
+    }
+    return true;
+  };
+  auto path_clear = [&](const std::vector<Eigen::VectorXd>& path) {
+    return std::all_of(path.begin(), path.end(), left_arm_clear);
+  };
   std::vector<double> turns{0.0};
   for (double t = options.pull_turn_step_rad; t <= options.max_pull_turn_rad + 1e-9; t += options.pull_turn_step_rad) {
     turns.push_back(-t);  // -: toward the right shoulder (+y_R) for an object in front
@@ -590,7 +623,46 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   for (const double turn : turns) {
   const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
   const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
-  const Eigen::Vector3d p_RE_start = p_RO - behind * u + options.height_offset_m * up;
+  const Eigen::Vector3d w = up.cross(u);  // horizontal, across the pull line
+  // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
+  // behind the object without touching it, or its effector would not meet the object.
+  // With the tool's points (in R, relative to the effector centre) and the effector centre at c:
+  // -1 when a point would come down on the object (inflated by clearance_m) during the vertical
+  // descent, 0 when the tool is clear but no effector point lies beyond the object within its
+  // cross-section (near the pull line, between the support and the centre height), 1 when fine.
+  auto start_clear = [&](const Eigen::Matrix3Xd& tool, const Eigen::Matrix3Xd& eff, const Eigen::Vector3d& c) {
+    const double r_in = object_radius + options.clearance_m;
+    for (Eigen::Index i = 0; i < tool.cols(); ++i) {
+      const Eigen::Vector3d d = c + tool.col(i) - p_RO;
+      const double rho2 = d.x() * d.x() + d.y() * d.y();
+      if (rho2 < r_in * r_in && d.z() < std::sqrt(r_in * r_in - rho2)) return -1;
+    }
+    for (Eigen::Index i = 0; i < eff.cols(); ++i) {
+      const Eigen::Vector3d d = c + eff.col(i) - p_RO;
+      if (d.dot(u) < 0 && std::abs(d.dot(w)) < 0.5 * object_radius && d.z() < 0.5 * object_radius) return 1;
+    }
+    return 0;
+  };
+  auto place_start = [&](const Eigen::Matrix3d& R_RT, Eigen::Vector3d* p_RE) -> bool {
+    if (!geometric) {
+      *p_RE = p_RO - behind * u + options.height_offset_m * up;
+      return true;
+    }
+    const Eigen::Matrix3Xd tool = R_RT * (effector.tool_points_T.colwise() - effector.center_T);
+    const Eigen::Matrix3Xd eff = R_RT * (effector.points_T.colwise() - effector.center_T);
+    // Lift the tool until its lowest point clears the support (table) the object rests on.
+    const double z = std::max(p_RO.z() + options.height_offset_m,
+                              support_z + options.support_clearance_m - tool.row(2).minCoeff());
+    for (double t = object_radius; t <= options.max_start_distance_m + 1e-9; t += options.start_step_m) {
+      const Eigen::Vector3d c(p_RO.x() - t * u.x(), p_RO.y() - t * u.y(), z);
+      const int clear = start_clear(tool, eff, c);
+      if (clear < 0) continue;
+      if (clear == 0) return false;
+      *p_RE = c;
+      return true;
+    }
+    return false;
+  };
 
   // Frames built in T from the palm -> effector line a_T and the working direction d_T, and in R
   // from the sampled line r and the pull direction u; the tool rotation maps one onto the other.
@@ -633,10 +705,23 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
             F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
             Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
             X_RT.linear() = F_R * F_T.transpose();
+            Eigen::Vector3d p_RE_start;
+            if (!place_start(X_RT.linear(), &p_RE_start)) {
+              ++result.candidates_blocked;
+              continue;
+            }
             X_RT.translation() = p_RE_start - X_RT.linear() * effector.center_T;
             const Eigen::Isometry3d X_RP = X_RT * X_TP;
-            IkResult ik = screen.Solve(X_RP, q_now);
+            if (X_RP.translation().z() < support_z + options.min_palm_height_m) {
+              ++result.candidates_blocked;
+              continue;
+            }
+            IkResult ik = loose_screen.Solve(X_RP, q_now);
             best_error = std::min(best_error, ik.position_error_m);
+            if (Converged(ik) && !left_arm_clear(ik.q)) {
+              ++result.candidates_blocked;
+              continue;
+            }
             if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik)});
           }
         }
@@ -650,27 +735,51 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   const int min_drag = std::max(2, static_cast<int>(std::ceil(options.min_pull_fraction * options.drag_waypoints)));
   const Candidate* chosen = nullptr;
   for (const Candidate& c : feasible) {
-    const Eigen::Isometry3d X_RP_start = c.X_RT * X_TP;
-    const IkResult start = solver.Solve(X_RP_start, c.ik.q);
+    Eigen::Isometry3d X_RP_start = c.X_RT * X_TP;
+    IkResult start = solver.Solve(X_RP_start, c.ik.q);
+    if (!Converged(start) && options.start_tolerance_m > 0) {
+      // At the edge of the workspace: accept a start up to start_tolerance_m off, planned from
+      // where the palm really ends, if the tool there is still clear of the object and behind it.
+      const IkResult loose = start_solver.Solve(X_RP_start, c.ik.q);
+      if (Converged(loose)) {
+        const Eigen::Isometry3d X_RT_real = chain.TipPose(loose.q) * X_PT;
+        const Eigen::Vector3d c_real = X_RT_real * effector.center_T;
+        const Eigen::Matrix3Xd tool = X_RT_real.linear() * (effector.tool_points_T.colwise() - effector.center_T);
+        const Eigen::Matrix3Xd eff = X_RT_real.linear() * (effector.points_T.colwise() - effector.center_T);
+        const bool above_support = c_real.z() + tool.row(2).minCoeff() >= support_z;
+        if (!geometric || (above_support && start_clear(tool, eff, c_real) == 1)) {
+          start = loose;
+          X_RP_start = chain.TipPose(loose.q);
+        }
+      }
+    }
     if (!Converged(start)) {
       last_failure = Cat("start IK: ", ToString(start.status));
       continue;
     }
+    // From approach_height_m above the start, else from half of it (the edge of the workspace;
+    // the descent check in place_start holds for any height above the object).
     Eigen::Isometry3d X_RP_above = X_RP_start;
     X_RP_above.translation() += options.approach_height_m * up;
-    const IkResult above = solver.Solve(X_RP_above, start.q);
+    IkResult above = solver.Solve(X_RP_above, start.q);
+    if (!Converged(above)) {
+      X_RP_above.translation() = X_RP_start.translation() + 0.5 * options.approach_height_m * up;
+      above = solver.Solve(X_RP_above, start.q);
+    }
     if (!Converged(above)) {
       last_failure = Cat("above-start IK: ", ToString(above.status));
       continue;
     }
     descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
-    if (static_cast<int>(descend.size()) < options.descend_waypoints) {
+    if (static_cast<int>(descend.size()) < options.descend_waypoints || !left_arm_clear(above.q) ||
+        !path_clear(descend)) {
       last_failure = Cat("descent waypoint ", descend.size() + 1, " IK failed");
       continue;
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
     X_RP_end.translation() += options.pull_length_m * u;
     drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
+    while (!drag.empty() && !left_arm_clear(drag.back())) drag.pop_back();
     if (static_cast<int>(drag.size()) < min_drag) {
       last_failure = Cat("drag IK ended after ", drag.size(), " of ", options.drag_waypoints, " waypoints");
       continue;
@@ -692,6 +801,8 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     result.roll_rad = chosen->roll;
     result.pull_dir_R = u;
     result.pull_turn_rad = turn;
+    const Eigen::Vector3d p_RE = chosen->X_RT * effector.center_T;
+    result.start_distance_m = Eigen::Vector2d(p_RE.x() - p_RO.x(), p_RE.y() - p_RO.y()).norm();
     planned = true;
     break;
   }

@@ -151,12 +151,41 @@ struct ToolEffector {
   /// tools); finite and non-zero (normalised by the skill).
   Eigen::Vector3d direction_T = Eigen::Vector3d::UnitX();
   double half_thickness_m = 0.005;  // effector half-size along the working direction [m], >= 0
+  /// Surface points of the effector region in T [m], 3xN (e.g. the mesh vertices near center_T);
+  /// optional. When given (with tool_points_T), PullObject places the start for each sampled tool
+  /// orientation from the geometry instead of half_thickness_m: the effector as close behind the
+  /// object as clearance_m allows, lifted so that no tool point is below the object's support.
+  Eigen::Matrix3Xd points_T;
+  /// Surface points of the whole held tool in T [m], 3xN (e.g. its mesh vertices); optional,
+  /// used with points_T: orientations whose tool (shaft included) would come down on the object
+  /// during the descent to the start are rejected.
+  Eigen::Matrix3Xd tool_points_T;
 };
 
 /// Options of PullObject. Defaults pull the scene's ball (scenes/default.json) with library tools
 /// grasped from the rack (measured by `toolbench bench --protocol pull-gt`).
 struct PullOptions {
   double clearance_m = 0.01;        // gap between the object's far surface and the effector [m], >= 0
+  /// With effector points (ToolEffector::points_T): lowest tool point this far above the object's
+  /// support plane (object centre height minus its radius) at the start [m], >= 0; the effector is
+  /// moved behind the object in steps of start_step_m [m] (> 0), its centre at most
+  /// max_start_distance_m [m] (> 0) from the object centre (horizontally).
+  double support_clearance_m = 0.008;
+  double start_step_m = 0.005;
+  double max_start_distance_m = 0.16;
+  /// Lowest palm origin height above the object's support plane at the start [m] (the hand wraps
+  /// about 4 cm around the handle; lower palms drive it into the table), >= 0.
+  double min_palm_height_m = 0.05;
+  /// A start pose whose IK ends up to this far from the target [m] (>= 0; 0 = exact) is accepted
+  /// when the tool where the palm really ends is still clear of the object and behind it; the
+  /// descent and drag are then planned from there (the edge of the workspace).
+  double start_tolerance_m = 0.012;
+  /// The left arm is fixed to the torso: a torso leaning toward the table drives it into the
+  /// table, and the torso then cannot reach the planned posture. Postures (start, descent, drag)
+  /// that put a link of left_arm_links lower than this above the object's support are
+  /// rejected [m], >= 0.
+  double left_arm_clearance_m = 0.06;
+  std::vector<std::string> left_arm_links{"l_hand", "l_wrist_1", "l_forearm"};
   double height_offset_m = 0.0;     // effector centre height above the object centre [m]
   double pull_length_m = 0.25;      // planned drag toward the robot [m], > 0
   /// The drag may be cut short where IK stops converging, but not below this fraction of
@@ -166,9 +195,11 @@ struct PullOptions {
   /// Tool orientations sampled: elevation of the palm -> effector line below the horizontal
   /// (min..max, step) [rad]; yaw of that line about z_R either side of the pull line [rad];
   /// roll of the tool about that line either side of "working side faces the robot" [rad].
-  double min_elevation_rad = 20.0 * M_PI / 180.0;
+  /// Low elevations reach furthest (a nearly horizontal tool), high ones lift the shaft over the
+  /// object; the lowest rest cost decides among those that plan.
+  double min_elevation_rad = 5.0 * M_PI / 180.0;
   double max_elevation_rad = 50.0 * M_PI / 180.0;
-  double elevation_step_rad = 15.0 * M_PI / 180.0;
+  double elevation_step_rad = 9.0 * M_PI / 180.0;
   double max_yaw_rad = 60.0 * M_PI / 180.0;
   double yaw_step_rad = 20.0 * M_PI / 180.0;
   double max_roll_rad = 90.0 * M_PI / 180.0;
@@ -222,14 +253,22 @@ struct PullResult {
   double roll_rad = 0.0;
   int candidates = 0;            // orientations sampled
   int candidates_feasible = 0;   // with a converged start-pose IK
+  int candidates_blocked = 0;    // with no collision-free start behind the object, or the palm too low
+  double start_distance_m = 0.0; // horizontal distance object centre -> effector centre at the start [m]
   double plan_ms = 0.0;          // wall time of planning [ms], informational
   double motion_s = 0.0;         // robot time of the whole motion [s]
 };
 
 /// Pulls an object (a ball) toward the robot with a tool held in the right hand:
 ///  1. the pull direction u is horizontal, from the object toward the robot's z axis (or turned
-///     by up to max_pull_turn_rad, straight first); the start
-///     puts the effector centre beyond the object, (object_radius + clearance_m +
+///     by up to max_pull_turn_rad, straight first); the start puts the effector centre beyond the
+///     object on the pull line. With effector points (ToolEffector::points_T, tool_points_T) the
+///     start is found per sampled orientation: the tool at the object's centre height (+
+///     height_offset_m), raised until its lowest point is support_clearance_m above the object's
+///     support, moved out along -u from the object until no tool point would come down on the
+///     object (inflated by clearance_m) during the vertical descent; rejected when then no effector
+///     point lies beyond the object within its cross-section, or the palm is lower than
+///     min_palm_height_m above the support. Without points: (object_radius + clearance_m +
 ///     effector.half_thickness_m) from its centre along -u, at its centre height (+ height_offset_m);
 ///  2. samples tool orientations: the palm -> effector line points away from the robot and down
 ///     (elevation, yaw about z_R), the working direction as close to u as that allows (roll),
@@ -242,7 +281,8 @@ struct PullResult {
 /// pose: GraspResult::X_RP_grasp.inverse() * X_RH * X_TH.inverse()); `p_RO` the object centre in R.
 /// Never throws for an unreachable object (a status). Throws std::invalid_argument for bad
 /// options, a non-finite p_RO, X_PT or effector (a tool without effector information), a
-/// non-positive object_radius, or a robot without the hand joints.
+/// non-positive object_radius, effector points given without tool points (or the reverse), or a
+/// robot without the hand joints.
 PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
                       const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
                       const PullOptions& options = {});

@@ -22,7 +22,7 @@ struct TableSpec {
 struct BallSpec {
   double radius = 0.035;                   // [m], > 0
   double mass = 0.06;                      // [kg], > 0
-  Eigen::Vector2d x_range{-0.62, -0.56};   // [m], min <= max
+  Eigen::Vector2d x_range{-0.62, -0.60};   // [m], min <= max
   Eigen::Vector2d y_range{-0.10, 0.05};    // [m], min <= max
 };
 

@@ -5,7 +5,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "app/bench_pull.h"
 #include "app/scene_setup.h"
+#include "common/rng.h"
 #include "control/skills.h"
 #include "sim/world.h"
 
@@ -50,6 +52,27 @@ TEST(PullTest, RejectsBadInput) {
       control::PullObject(robot, scene.robot, X_PT, effector, Eigen::Vector3d(-2.0, 0.0, 0.0), 0.035);
   EXPECT_EQ(far.status, control::PullStatus::kUnreachable);
   EXPECT_EQ(robot.PositionTargets(), before);
+}
+
+constexpr double kMinPullM = 0.05;  // issue 4: the ball comes > 5 cm toward the robot
+
+// A rake grasped from its ground-truth handle on the rack reaches behind the ball, which starts
+// out of the arm's reach, and drags it toward the robot into reach (pull-gt's case for this tool
+// and seed). The skill's status is not asserted: in this case the rake slips out of the hand
+// after the drag (PullStatus::kLostTool), a known open problem of the contact-only grip.
+TEST(PullTest, RakeFromItsGroundTruthHandlePullsTheBallIntoReach) {
+  constexpr const char* kTool = "rake_2";
+  SceneRequest request;
+  request.tools = {kTool};
+  const LoadedScene scene = LoadScene(request);
+  PullCaseOptions options;
+  options.put_down_and_grasp_ball = false;
+  const PullCaseResult r = RunPullCase(scene, kTool, DeriveSeed(request.seed, std::string("pull/") + kTool), options);
+  EXPECT_FALSE(r.ball_in_reach_before) << "the ball must start out of reach";
+  ASSERT_TRUE(r.grasped) << r.reason;
+  EXPECT_NE(r.pull.status, control::PullStatus::kUnreachable) << r.pull.reason;
+  EXPECT_GT(r.displacement_m, kMinPullM);
+  EXPECT_TRUE(r.ball_in_reach) << r.reason;
 }
 
 TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
