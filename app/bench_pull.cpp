@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
 #include <spdlog/spdlog.h>
+#include <Eigen/Geometry>
 
 #include "app/overview.h"
 #include "common/check.h"
@@ -30,29 +30,6 @@ Eigen::Isometry3d HandleFrame(const toollib::Segment& handle) {
 
 // The effector as the pull skill wants it: centre of the effector segment, working direction +x_T,
 // and how far the mesh reaches from the centre along it (the part that meets the ball).
-control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
-  control::ToolEffector e;
-  e.center_T = model.effector.center;
-  e.direction_T = Eigen::Vector3d::UnitX();
-  const double region = model.effector.length / 2 + model.effector.radius;
-  double reach = 0.0;
-  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
-    const Eigen::Vector3d d = model.mesh.vertices.col(v).cast<double>() - e.center_T;
-    if (d.norm() <= region) reach = std::max(reach, d.dot(e.direction_T));
-  }
-  e.half_thickness_m = reach;
-  // The geometry the pull plans with: the effector region's vertices and the whole mesh.
-  std::vector<Eigen::Index> near;
-  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
-    if ((model.mesh.vertices.col(v).cast<double>() - e.center_T).norm() <= region) near.push_back(v);
-  }
-  e.points_T.resize(3, static_cast<Eigen::Index>(near.size()));
-  for (size_t i = 0; i < near.size(); ++i) {
-    e.points_T.col(static_cast<Eigen::Index>(i)) = model.mesh.vertices.col(near[i]).cast<double>();
-  }
-  e.tool_points_T = model.mesh.vertices.cast<double>();
-  return e;
-}
 
 }  // namespace
 
@@ -117,8 +94,8 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   out.ball_start_R = ball_R();
   out.ball_end_R = out.ball_start_R;
   const double radius = scene.spec.ball.radius;
-  out.ball_in_reach_before = control::BallInReach(scene.robot, scene.robot.HomeQ(), out.ball_start_R, radius,
-                                                  options.ball_grasp);
+  out.ball_in_reach_before =
+      control::BallInReach(scene.robot, scene.robot.HomeQ(), out.ball_start_R, radius, options.ball_grasp);
 
   // 1. Grasp from the ground-truth handle, choked toward the end away from the effector (the
   // tool then reaches further): 60 % of the way to the end, else 30 %, else the centre.
@@ -255,8 +232,8 @@ int RunPullBench(const BenchRequest& request) {
                            {"sim_time_s", r.sim_time},
                            {"wall_ms", r.wall_ms}};
     cases << line.dump() << "\n" << std::flush;
-    spdlog::info("pull-gt {}: ball moved {:.1f} cm toward the robot, {} ({}) [{:.0f} ms]", tool,
-                 r.displacement_m * 100, r.ball_in_reach ? "in reach" : "out of reach", r.reason, r.wall_ms);
+    spdlog::info("pull-gt {}: ball moved {:.1f} cm toward the robot, {} ({}) [{:.0f} ms]", tool, r.displacement_m * 100,
+                 r.ball_in_reach ? "in reach" : "out of reach", r.reason, r.wall_ms);
   }
   auto ratio = [](int k, int n) { return n > 0 ? static_cast<double>(k) / n : std::nan(""); };
   auto tally_json = [&](const Tally& t) {

@@ -398,10 +398,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
 
     // ---- 6. Pull the ball. ----
     run_stage("pull", [&](StageRecord& s) {
-      control::ToolEffector effector;
-      effector.center_T = model->effector.center;
-      effector.direction_T = Eigen::Vector3d::UnitX();
-      effector.half_thickness_m = std::max(0.003, tool.features.effector_size.x() / 2);
+      // The recognised library model's effector geometry (library knowledge, not ground truth).
+      const control::ToolEffector effector = EffectorOf(*model);
       const control::PullResult p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius);
       s.ok = p.status == control::PullStatus::kPulled;
       s.outcome = control::ToString(p.status);

@@ -17,10 +17,8 @@ namespace {
 /// right arm down beside the torso (in the home posture the hand reaches forward-right, right in
 /// front of the rack).
 const std::map<std::string, double> kObservePostureDeg = {
-    {"torso_pitch", -20.0},
-    {"r_shoulder_pitch", -5.0}, {"r_shoulder_roll", 12.0}, {"r_shoulder_yaw", 0.0},
-    {"r_elbow", 25.0},          {"r_wrist_prosup", 0.0},   {"r_wrist_pitch", 0.0},
-    {"r_wrist_yaw", 0.0}};
+    {"torso_pitch", -20.0}, {"r_shoulder_pitch", -5.0}, {"r_shoulder_roll", 12.0}, {"r_shoulder_yaw", 0.0},
+    {"r_elbow", 25.0},      {"r_wrist_prosup", 0.0},    {"r_wrist_pitch", 0.0},    {"r_wrist_yaw", 0.0}};
 
 }  // namespace
 
@@ -48,16 +46,15 @@ std::vector<toollib::ToolModel> LoadLibraries(const sim::SceneSpec& spec,
 
 LoadedScene LoadScene(const SceneRequest& request) {
   LoadedScene loaded;
-  const std::filesystem::path scene_file =
-      request.scene_file.empty() ? sim::DefaultScenePath() : request.scene_file;
+  const std::filesystem::path scene_file = request.scene_file.empty() ? sim::DefaultScenePath() : request.scene_file;
   loaded.spec = sim::LoadSceneSpec(scene_file);
   loaded.robot = robot::LoadRobotDescription(AssetsDir() / loaded.spec.robot);
   loaded.library = LoadLibraries(loaded.spec, request.extra_tool_dirs);
 
   std::vector<sim::ToolPlacement> placements;
   if (!request.cells.empty() && request.cells.size() != request.tools.size()) {
-    ThrowInvalid("--cells has ", request.cells.size(), " entries but --tools has ",
-                 request.tools.size(), "; give one cell per tool");
+    ThrowInvalid("--cells has ", request.cells.size(), " entries but --tools has ", request.tools.size(),
+                 "; give one cell per tool");
   }
   for (size_t i = 0; i < request.tools.size(); ++i) {
     sim::ToolPlacement p;
@@ -90,8 +87,7 @@ Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<s
   return q;
 }
 
-Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot,
-                                         const RobotInterface& interface) {
+Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot, const RobotInterface& interface) {
   const Eigen::VectorXd q = ModelQ(robot, interface.JointNames(), interface.ReadEncoders());
   return robot::LinkPose(robot.model, q, robot.camera_frame);
 }
@@ -101,8 +97,7 @@ Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
   return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);
 }
 
-LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot,
-                  const Eigen::Vector3d& p_R_target) {
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target) {
   LookResult result;
   // Gaze starts from the observation posture (torso leaning back a little, for distance).
   std::map<std::string, double> observe;
@@ -111,9 +106,10 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
       robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), observe);
   result.gaze = control::LookAt(robot, q, p_R_target);
   if (!result.gaze.converged) {
-    spdlog::warn("gaze: target {} {} {} cannot be centred (residual {:.1f} deg); looking as close "
-                 "as the joint limits allow",
-                 p_R_target.x(), p_R_target.y(), p_R_target.z(), result.gaze.error_deg);
+    spdlog::warn(
+        "gaze: target {} {} {} cannot be centred (residual {:.1f} deg); looking as close "
+        "as the joint limits allow",
+        p_R_target.x(), p_R_target.y(), p_R_target.z(), result.gaze.error_deg);
   }
   // The right arm moves down beside the torso at the same time, so that the hand does not hide
   // the rack (in the home posture it reaches forward-right, right in front of it).
@@ -121,6 +117,30 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
   for (const auto& [joint, value] : result.gaze.joints) goal[joint] = value;
   result.motion = control::MoveJoints(interface, goal);
   return result;
+}
+
+control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
+  control::ToolEffector e;
+  e.center_T = model.effector.center;
+  e.direction_T = Eigen::Vector3d::UnitX();
+  const double region = model.effector.length / 2 + model.effector.radius;
+  double reach = 0.0;
+  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
+    const Eigen::Vector3d d = model.mesh.vertices.col(v).cast<double>() - e.center_T;
+    if (d.norm() <= region) reach = std::max(reach, d.dot(e.direction_T));
+  }
+  e.half_thickness_m = reach;
+  // The geometry the pull plans with: the effector region's vertices and the whole mesh.
+  std::vector<Eigen::Index> near;
+  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
+    if ((model.mesh.vertices.col(v).cast<double>() - e.center_T).norm() <= region) near.push_back(v);
+  }
+  e.points_T.resize(3, static_cast<Eigen::Index>(near.size()));
+  for (size_t i = 0; i < near.size(); ++i) {
+    e.points_T.col(static_cast<Eigen::Index>(i)) = model.mesh.vertices.col(near[i]).cast<double>();
+  }
+  e.tool_points_T = model.mesh.vertices.cast<double>();
+  return e;
 }
 
 }  // namespace toolbench::app

@@ -9,6 +9,7 @@
 
 #include "control/gaze.h"
 #include "control/motion.h"
+#include "control/skills.h"
 #include "robot/robot_description.h"
 #include "sim/scene_composer.h"
 #include "sim/scene_spec.h"
@@ -19,11 +20,11 @@ namespace toolbench::app {
 
 /// What the user asked for on the command line.
 struct SceneRequest {
-  std::filesystem::path scene_file;                     // empty = scenes/default.json
+  std::filesystem::path scene_file;  // empty = scenes/default.json
   std::uint64_t seed = 1;
-  std::vector<std::string> tools;                       // empty = drawn from the seed
-  std::vector<std::string> cells;                       // one per tool, or empty
-  std::vector<std::filesystem::path> extra_tool_dirs;   // user tools (mesh + sidecar)
+  std::vector<std::string> tools;                      // empty = drawn from the seed
+  std::vector<std::string> cells;                      // one per tool, or empty
+  std::vector<std::filesystem::path> extra_tool_dirs;  // user tools (mesh + sidecar)
 };
 
 /// Everything loaded and composed for one scene.
@@ -50,8 +51,7 @@ Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<s
 
 /// Camera pose in the root frame from the encoders (forward kinematics of the URDF): the only
 /// camera pose perception may use.
-Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot,
-                                         const RobotInterface& interface);
+Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot, const RobotInterface& interface);
 
 /// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
@@ -64,7 +64,11 @@ struct LookResult {
 
 /// Solves gaze for `p_R_target` and moves torso and neck there with a minimum-jerk trajectory
 /// (thesis Fig. 5.4). Never throws for an unreachable gaze: the result says so.
-LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot,
-                  const Eigen::Vector3d& p_R_target);
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target);
+
+/// The effector of a library tool as the pull skill needs it, in T: the sidecar's effector
+/// centre, working direction +x_T, its reach along +x_T from the mesh, the mesh vertices of the
+/// effector region and of the whole tool.
+control::ToolEffector EffectorOf(const toollib::ToolModel& model);
 
 }  // namespace toolbench::app
