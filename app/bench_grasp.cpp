@@ -19,15 +19,6 @@
 namespace toolbench::app {
 namespace {
 
-// Handle frame H in T: origin at the handle centre, z along the handle axis.
-Eigen::Isometry3d HandleFrame(const toollib::Segment& handle) {
-  Eigen::Isometry3d X_TH = Eigen::Isometry3d::Identity();
-  X_TH.linear() =
-      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), handle.axis.normalized()).toRotationMatrix();
-  X_TH.translation() = handle.center;
-  return X_TH;
-}
-
 // The failure key of a reason ("slip: 7.1 mm" -> "slip"), for the histogram.
 std::string ReasonKey(const std::string& reason) { return reason.substr(0, reason.find(':')); }
 

@@ -20,14 +20,6 @@
 namespace toolbench::app {
 namespace {
 
-Eigen::Isometry3d HandleFrame(const toollib::Segment& handle) {
-  Eigen::Isometry3d X_TH = Eigen::Isometry3d::Identity();
-  X_TH.linear() =
-      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), handle.axis.normalized()).toRotationMatrix();
-  X_TH.translation() = handle.center;
-  return X_TH;
-}
-
 // The effector as the pull skill wants it: centre of the effector segment, working direction +x_T,
 // and how far the mesh reaches from the centre along it (the part that meets the ball).
 

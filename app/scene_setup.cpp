@@ -143,4 +143,12 @@ control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
   return e;
 }
 
+Eigen::Isometry3d HandleFrame(const toollib::Segment& handle) {
+  Eigen::Isometry3d X_TH = Eigen::Isometry3d::Identity();
+  X_TH.linear() =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), handle.axis.normalized()).toRotationMatrix();
+  X_TH.translation() = handle.center;
+  return X_TH;
+}
+
 }  // namespace toolbench::app

@@ -71,4 +71,8 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
 /// effector region and of the whole tool.
 control::ToolEffector EffectorOf(const toollib::ToolModel& model);
 
+/// Handle frame H of a tool's handle segment, in T: origin at the handle centre, z_H along the
+/// handle axis (the grasp skills' convention; the rotation about z_H is the shortest turn from z_T).
+Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);
+
 }  // namespace toolbench::app
