@@ -159,20 +159,25 @@ int main(int argc, char** argv) {
   app::SceneRequest perceive_request;
   std::filesystem::path perceive_out;
   bool perceive_no_noise = false;
-  CLI::App* perceive =
-      cli.add_subcommand("perceive",
-                         "Capture a frame of the rack (as render) and run perception on it: segments, "
-                         "object clouds, recognised models, fitted poses and handles (analysis.json, "
-                         "segments.png, tool_<i>.ply) and their score against ground truth (score.json)");
+  CLI::App* perceive = cli.add_subcommand(
+      "perceive",
+      "Capture a frame of the rack (as render) and run the episode's perception pipeline on it, writing every "
+      "step: analysis.json (one full tool analysis per segment), segments.png, mask_<i>.png, roi_<i>.png, "
+      "tool_<i>_fit.ply, tool_<i>_parts.ply, tool_<i>_superquadrics.ply, handles.png, and the score against "
+      "ground truth (score.json)");
   AddSceneOptions(perceive, perceive_request);
   perceive->add_option("--out", perceive_out, "Output folder (default: runs/perceive-seed<N>)");
   perceive->add_flag("--no-noise", perceive_no_noise, "Ideal images: switch the sensor noise model off");
   std::filesystem::path perceive_classifier = app::DefaultClassifierPath();
   bool perceive_no_classifier = false;
+  bool perceive_user_tools_unknown = false;
   perceive->add_option("--classifier", perceive_classifier, "Tool classifier file (toolbench train-recognizer)")
       ->capture_default_str();
   perceive->add_flag("--no-classifier", perceive_no_classifier,
                      "Recognise without the classifier: extent pre-selection and fit scores only");
+  perceive->add_flag("--user-tools-unknown", perceive_user_tools_unknown,
+                     "Put the --tool-dir tools on the rack but keep them out of perception's library: they are "
+                     "analysed as unknown tools from their clouds");
 
   app::TrainRecognizerRequest train_request;
   CLI::App* train = cli.add_subcommand(
@@ -288,8 +293,10 @@ int main(int argc, char** argv) {
       if (perceive_out.empty()) perceive_out = "runs/perceive-seed" + std::to_string(perceive_request.seed);
       app::CaptureOptions options;
       options.noise = !perceive_no_noise;
-      return app::RunPerceive(perceive_request, perceive_out, options,
-                              perceive_no_classifier ? std::filesystem::path() : perceive_classifier);
+      app::PerceiveOptions perceive_options;
+      perceive_options.classifier = perceive_no_classifier ? std::filesystem::path() : perceive_classifier;
+      perceive_options.user_tools_unknown = perceive_user_tools_unknown;
+      return app::RunPerceive(perceive_request, perceive_out, options, perceive_options);
     }
     if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
     if (train->parsed()) return app::RunTrainRecognizer(train_request);

@@ -156,8 +156,26 @@ double ToolAnalyzer::preparation_ms() const { return impl_->preparation_ms; }
 FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
   FrameAnalysis out;
   auto t = Clock::now();
-  out.segments = SegmentTools(frame, impl_->options.segmentation);
+  out.segments = SegmentTools(frame, impl_->options.segmentation);  // checks the images
   const double segmentation_ms = Ms(t);
+  // The stages after segmentation check these too, but only when a tool was found: a bad
+  // camera model must not pass unnoticed on a frame that happens to show none.
+  if (frame.depth.empty()) {
+    ThrowInvalid("ToolAnalyzer::Analyze: frame.depth is empty (expected CV_32FC1 of the rgb size ", frame.rgb.cols,
+                 "x", frame.rgb.rows, ")");
+  }
+  const CameraIntrinsics& k = frame.intrinsics;
+  if (k.width != frame.rgb.cols || k.height != frame.rgb.rows || !(k.fx > 0) || !(k.fy > 0)) {
+    ThrowInvalid("ToolAnalyzer::Analyze: frame.intrinsics ", k.width, "x", k.height, " fx ", k.fx, " fy ", k.fy,
+                 " do not describe the ", frame.rgb.cols, "x", frame.rgb.rows, " images (expected the image size and "
+                 "positive focal lengths)");
+  }
+  if (!frame.X_RC.matrix().allFinite()) ThrowInvalid("ToolAnalyzer::Analyze: frame.X_RC is not finite");
+  if (out.segments.empty()) {
+    out.reason = Cat("no tool segmented: no region of saturated colour (S >= ",
+                     impl_->options.segmentation.min_saturation, ", V >= ", impl_->options.segmentation.min_value,
+                     ") of at least ", impl_->options.segmentation.min_area_px, " px");
+  }
   const std::optional<Eigen::Vector3d> p_R_camera = frame.X_RC.translation();
   for (size_t i = 0; i < out.segments.size(); ++i) {
     const ToolSegment& segment = out.segments[i];

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "common/types.h"
@@ -59,6 +60,7 @@ struct FrameAnalysis {
   std::vector<StageTimes> times;               // one per segment, same order
   std::vector<RecognitionResult> recognition;  // one per segment (status kTooFewPoints when no cloud)
   std::vector<ObjectCloud> clouds;             // one per segment
+  std::string reason;  // why no tool was found when `segments` is empty, else empty
 };
 
 /// The perception pipeline of one robot: RGB-D frame (and the camera pose from
@@ -77,8 +79,10 @@ class ToolAnalyzer {
 
   /// Segments the frame, extracts each tool's cloud, recognises and fits it,
   /// and places its handle. Tools whose cloud or fit fails are still reported,
-  /// with a status and reason. Throws std::invalid_argument for a malformed
-  /// frame (see SegmentTools, ExtractObjectCloud).
+  /// with a status and reason (e.g. kNoCloud for a tool without usable depth); a frame without
+  /// any tool gives no entries and a FrameAnalysis::reason. Throws std::invalid_argument for a
+  /// malformed frame (empty or non-CV_8UC3 rgb, depth of another size or type, intrinsics that
+  /// do not match the images: see SegmentTools, ExtractObjectCloud).
   FrameAnalysis Analyze(const RgbdFrame& frame) const;
 
   /// Analyses (or loads from the shape cache) the shapes of the named library models now, so

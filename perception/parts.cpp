@@ -766,14 +766,23 @@ const ModelShape& ShapeCache::Get(const toollib::ToolModel& model, const ShapeOp
   return shape;
 }
 
-void WritePartsPly(const std::filesystem::path& path, const std::vector<Part>& parts, int handle_part,
-                   int superquadric_points) {
+namespace {
+
+/// Display colour (RGB) of part i: the handle blue, the others from a palette without blue.
+const unsigned char* PartColour(std::size_t i, int handle_part) {
   static constexpr unsigned char kPalette[][3] = {{230, 80, 40},  {60, 180, 75},  {240, 200, 40}, {170, 60, 200},
                                                   {240, 130, 200}, {70, 200, 200}, {150, 100, 40}, {128, 128, 0}};
-  constexpr unsigned char kHandle[3] = {40, 90, 230};
+  static constexpr unsigned char kHandle[3] = {40, 90, 230};
+  return static_cast<int>(i) == handle_part ? kHandle : kPalette[i % 8];
+}
+
+}  // namespace
+
+void WritePartsPly(const std::filesystem::path& path, const std::vector<Part>& parts, int handle_part,
+                   int superquadric_points) {
   std::vector<std::pair<Eigen::Vector3f, std::array<unsigned char, 3>>> out;
   for (std::size_t i = 0; i < parts.size(); ++i) {
-    const unsigned char* c = static_cast<int>(i) == handle_part ? kHandle : kPalette[i % 8];
+    const unsigned char* c = PartColour(i, handle_part);
     const std::array<unsigned char, 3> color{c[0], c[1], c[2]};
     for (Eigen::Index k = 0; k < parts[i].points.cols(); ++k) out.push_back({parts[i].points.col(k), color});
     if (superquadric_points > 0 && parts[i].sq.size.minCoeff() > 0.0) {
@@ -793,6 +802,43 @@ void WritePartsPly(const std::filesystem::path& path, const std::vector<Part>& p
     file << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << int{c[0]} << ' ' << int{c[1]} << ' ' << int{c[2]} << '\n';
   }
   if (!file) throw std::runtime_error(Cat("WritePartsPly: cannot write ", path.string()));
+}
+
+void WriteSuperquadricsPly(const std::filesystem::path& path, const std::vector<Part>& parts, int handle_part,
+                           int n) {
+  if (n < 3) ThrowInvalid("WriteSuperquadricsPly: n = ", n, " (expected >= 3)");
+  std::vector<SurfaceMesh> meshes;
+  std::vector<const unsigned char*> colours;
+  Eigen::Index vertices = 0, faces = 0;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    if (!(parts[i].sq.size.minCoeff() > 0.0)) continue;
+    meshes.push_back(SuperquadricMesh(parts[i].sq, n));
+    colours.push_back(PartColour(i, handle_part));
+    vertices += meshes.back().vertices.cols();
+    faces += meshes.back().faces.cols();
+  }
+  std::ofstream file(path);
+  file << "ply\nformat ascii 1.0\nelement vertex " << vertices
+       << "\nproperty float x\nproperty float y\nproperty float z\n"
+          "property uchar red\nproperty uchar green\nproperty uchar blue\nelement face "
+       << faces << "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (std::size_t m = 0; m < meshes.size(); ++m) {
+    const unsigned char* c = colours[m];
+    for (Eigen::Index k = 0; k < meshes[m].vertices.cols(); ++k) {
+      const Eigen::Vector3f p = meshes[m].vertices.col(k);
+      file << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << int{c[0]} << ' ' << int{c[1]} << ' ' << int{c[2]}
+           << '\n';
+    }
+  }
+  Eigen::Index offset = 0;
+  for (const SurfaceMesh& mesh : meshes) {
+    for (Eigen::Index f = 0; f < mesh.faces.cols(); ++f) {
+      file << "3 " << offset + mesh.faces(0, f) << ' ' << offset + mesh.faces(1, f) << ' ' << offset + mesh.faces(2, f)
+           << '\n';
+    }
+    offset += mesh.vertices.cols();
+  }
+  if (!file) throw std::runtime_error(Cat("WriteSuperquadricsPly: cannot write ", path.string()));
 }
 
 }  // namespace toolbench::perception

@@ -179,4 +179,13 @@ class ShapeCache {
 void WritePartsPly(const std::filesystem::path& path, const std::vector<Part>& parts, int handle_part,
                    int superquadric_points = 0);
 
+/// Writes an ASCII PLY triangle mesh (vertex x y z as float with red green blue as uchar, faces
+/// as vertex-index lists) of every part's superquadric surface (SuperquadricMesh with `n`
+/// latitudes, 2n (2n - 4) faces per part), each part in the colour WritePartsPly gives its
+/// points (the handle part blue), so that a mesh viewer shows the fitted shapes. Parts whose
+/// superquadric has a non-positive semi-axis are left out. Coordinates in F. Throws
+/// std::invalid_argument for n < 3, std::runtime_error naming the file when it cannot be written.
+void WriteSuperquadricsPly(const std::filesystem::path& path, const std::vector<Part>& parts, int handle_part,
+                           int n = 24);
+
 }  // namespace toolbench::perception

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <utility>
@@ -109,8 +110,28 @@ MeshSegmentation SegmentBySdf(const Eigen::Matrix3Xd& vertices, const std::vecto
   // steps of the segmentation seed CGAL::Random with a fixed CGAL_DEFAULT_SEED.
   try {
     CGAL::sdf_values(mesh, sdf);
-    num_segments = CGAL::segmentation_from_sdf_values(mesh, sdf, seg, static_cast<std::size_t>(params.clusters),
-                                                      params.smoothing);
+    // CGAL's k-means++ seeding draws each next centre with probability proportional to the
+    // squared distance to the centres so far; with fewer distinct SDF values than clusters (a
+    // flat patch: every ray misses, every value the same) that range is empty, and boost::random
+    // recurses until the stack overflows. So: at most as many clusters as distinct values, and
+    // a surface of one thickness (or with non-finite values) is one part.
+    std::vector<double> values;
+    values.reserve(mesh.number_of_faces());
+    bool finite = true;
+    for (Mesh::Face_index f : mesh.faces()) {
+      finite = finite && std::isfinite(sdf[f]);
+      values.push_back(sdf[f]);
+    }
+    std::sort(values.begin(), values.end());
+    const std::size_t distinct =
+        finite ? static_cast<std::size_t>(std::unique(values.begin(), values.end()) - values.begin()) : 0;
+    if (distinct >= 2) {
+      const std::size_t clusters = std::min(static_cast<std::size_t>(params.clusters), distinct);
+      num_segments = CGAL::segmentation_from_sdf_values(mesh, sdf, seg, clusters, params.smoothing);
+    } else {
+      for (Mesh::Face_index f : mesh.faces()) seg[f] = 0;
+      num_segments = 1;
+    }
   } catch (const std::exception& e) {
     result.error = std::string("CGAL SDF segmentation failed: ") + e.what();
     return result;

@@ -393,4 +393,24 @@ Eigen::Matrix3Xf SuperquadricSurface(const Superquadric& sq, int n) {
   return out;
 }
 
+SurfaceMesh SuperquadricMesh(const Superquadric& sq, int n) {
+  SurfaceMesh mesh;
+  mesh.vertices = SuperquadricSurface(sq, n);
+  const int m = 2 * n;  // vertices per latitude row
+  mesh.faces.resize(3, 2 * m * (n - 2));
+  int f = 0;
+  for (int i = 0; i + 1 < n; ++i) {
+    for (int j = 0; j < m; ++j) {
+      const int a = i * m + j, b = i * m + (j + 1) % m;  // row i, j and its eastern neighbour
+      const int c = a + m, d = b + m;                    // the same on row i + 1 (north)
+      // East then north is counter-clockwise seen from outside. Row 0 is the south pole (a and
+      // b coincide), row n - 1 the north pole (c and d coincide).
+      if (i > 0) mesh.faces.col(f++) << a, b, d;
+      if (i + 2 < n) mesh.faces.col(f++) << a, d, c;
+    }
+  }
+  TOOLBENCH_DEMAND(f == mesh.faces.cols());
+  return mesh;
+}
+
 }  // namespace toolbench::perception

@@ -78,4 +78,18 @@ double InsideOutside(const Superquadric& sq, const Eigen::Vector3d& p_F);
 /// [-pi, pi)). Throws std::invalid_argument when n < 2 or the semi-axes are not positive.
 Eigen::Matrix3Xf SuperquadricSurface(const Superquadric& sq, int n);
 
+/// A closed triangle mesh for display.
+struct SurfaceMesh {
+  Eigen::Matrix3Xf vertices;  // 3 x V, in the owner's frame F [m]
+  Eigen::Matrix3Xi faces;     // 3 x F vertex indices, counter-clockwise seen from outside
+};
+
+/// The surface of `sq` as a triangle mesh in its owner's frame F [m], for display: the n x 2n
+/// grid of SuperquadricSurface (same vertices, same order; each pole row's 2n vertices
+/// coincide, so the surface is closed although the pole vertices are not shared), its quads
+/// split into two triangles each, the triangles that collapse at the poles left out:
+/// 2n (2n - 4) faces with outward normals. Throws std::invalid_argument like
+/// SuperquadricSurface.
+SurfaceMesh SuperquadricMesh(const Superquadric& sq, int n);
+
 }  // namespace toolbench::perception

@@ -66,11 +66,14 @@ struct ToolAnalysis {
   std::string reason;        // empty when kOk
   int segment = -1;          // index of the 2D segment it came from
   cv::Rect roi;              // the segment's bounding box [px]
-  std::string model;         // recognised library model; empty for an unknown tool
+  std::string model;         // recognised library model; for an unknown tool (known = false) the
+                             // closest library model, empty when no model could be fitted
   bool known = false;        // true: a library model was recognised with enough confidence
-  double confidence = 0.0;   // in [0, 1]: probability of `model` (unknown tools: low, stated)
-  Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();  // fitted tool frame T in R
-  double fit_error = 0.0;    // mean observed-to-model distance [m]
+                             // (AnalyzerOptions::min_known_confidence) and fit (max_known_fit_error)
+  double confidence = 0.0;   // in [0, 1]: the recogniser's probability of `model`
+  Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();  // tool frame T in R: the fitted model's
+                             // when known, else estimated from the observed handle
+  double fit_error = 0.0;    // mean observed-to-model distance of `model`'s fit [m]
   std::vector<Part> parts;   // in R
   Handle handle;             // in R (X_FH is X_RH)
   ToolFeatures features;     // in T

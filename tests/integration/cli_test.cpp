@@ -103,6 +103,66 @@ TEST(CliTest, RenderWritesTheFrameFiles) {
   }
 }
 
+std::string ReadFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+TEST(CliTest, PerceiveWritesEveryStep) {
+  const auto dir = TempDir("perceive");
+  const CliRun r = Toolbench("perceive --seed 1 --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* file : {"rgb.png", "depth.png", "camera.json", "cloud.ply", "ground_truth.json", "analysis.json",
+                           "segments.png", "handles.png", "score.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / file)) << file;
+  }
+  const nlohmann::json analysis = nlohmann::json::parse(ReadFile(dir / "analysis.json"));
+  ASSERT_FALSE(analysis["tools"].empty()) << analysis.dump(2);
+  int analysed = 0;
+  for (size_t i = 0; i < analysis["tools"].size(); ++i) {
+    const nlohmann::json& tool = analysis["tools"][i];
+    for (const char* key : {"status", "reason", "segment", "roi", "model", "known", "confidence", "X_RT", "fit_error_m",
+                            "parts", "handle", "features", "ms", "cloud", "candidates", "files"}) {
+      EXPECT_TRUE(tool.contains(key)) << "tool " << i << " lacks " << key;
+    }
+    const std::string n = std::to_string(i);
+    EXPECT_TRUE(std::filesystem::exists(dir / ("mask_" + n + ".png"))) << n;
+    EXPECT_TRUE(std::filesystem::exists(dir / ("roi_" + n + ".png"))) << n;
+    for (const auto& file : tool["files"]) {
+      EXPECT_GT(std::filesystem::file_size(dir / file.get<std::string>()), 100u) << file;
+    }
+    if (tool["status"] != "ok") continue;
+    ++analysed;
+    for (const char* key : {"center_R", "axis_R", "radius_m", "length_m", "X_RH"}) {
+      EXPECT_TRUE(tool["handle"].contains(key)) << key;
+    }
+    ASSERT_FALSE(tool["parts"].empty());
+    for (const char* key : {"size_m", "e1", "e2", "X_RS"}) {
+      EXPECT_TRUE(tool["parts"][0]["superquadric"].contains(key)) << key;
+    }
+    for (const char* key : {"segmentation", "cloud", "classification", "recognition", "shape", "total"}) {
+      EXPECT_TRUE(tool["ms"].contains(key)) << key;
+    }
+    EXPECT_THAT(ReadFile(dir / ("tool_" + n + "_fit.ply")), HasSubstr("element vertex"));
+    EXPECT_THAT(ReadFile(dir / ("tool_" + n + "_parts.ply")), HasSubstr("element vertex"));
+    EXPECT_THAT(ReadFile(dir / ("tool_" + n + "_superquadrics.ply")), HasSubstr("element face"));
+  }
+  EXPECT_GT(analysed, 0);
+  const nlohmann::json score = nlohmann::json::parse(ReadFile(dir / "score.json"));
+  ASSERT_FALSE(score["tools"].empty());
+  EXPECT_TRUE(score["tools"][0].contains("verdict"));
+  EXPECT_TRUE(score.contains("mean_score"));
+}
+
+TEST(CliTest, PerceiveBadInputIsNamed) {
+  CliRun r = Toolbench("perceive --user-tools-unknown --out " + TempDir("perceive_bad").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--tool-dir"));
+  r = Toolbench("perceive --classifier /nonexistent/c.yml.gz --out " + TempDir("perceive_bad2").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("/nonexistent/c.yml.gz"));
+}
+
 TEST(CliTest, Table53BenchScoresCasesAndWritesTheReport) {
   const auto dir = TempDir("table53");
   // Two cases of the sweep (hammer_1 in pos1 and pos2), ours and the thesis configuration.

@@ -188,6 +188,52 @@ TEST(SuperquadricFitTest, SurfacePointsLieOnTheSuperquadric) {
   }
 }
 
+TEST(SuperquadricMeshTest, ClosedOutwardMeshOnTheSurface) {
+  // An ellipsoid (e1 = e2 = 1): every vertex on the surface, every face normal outward, and
+  // the area close to the ellipsoid's (Knud Thomsen's formula, error < 1.1 %).
+  Rng rng(5);
+  Superquadric sq;
+  sq.size = Eigen::Vector3d(0.02, 0.03, 0.08);
+  sq.pose = RandomPose(rng);
+  constexpr int kN = 40;
+  const SurfaceMesh mesh = SuperquadricMesh(sq, kN);
+  ASSERT_EQ(mesh.vertices.cols(), 2 * kN * kN);
+  ASSERT_EQ(mesh.faces.cols(), 2 * kN * (2 * kN - 4));
+  EXPECT_TRUE(mesh.vertices.isApprox(SuperquadricSurface(sq, kN)));
+  ASSERT_GE(mesh.faces.minCoeff(), 0);
+  ASSERT_LT(mesh.faces.maxCoeff(), mesh.vertices.cols());
+  const Eigen::Vector3d centre = sq.pose.translation();
+  double area = 0.0;
+  for (Eigen::Index f = 0; f < mesh.faces.cols(); ++f) {
+    const Eigen::Vector3d a = mesh.vertices.col(mesh.faces(0, f)).cast<double>();
+    const Eigen::Vector3d b = mesh.vertices.col(mesh.faces(1, f)).cast<double>();
+    const Eigen::Vector3d c = mesh.vertices.col(mesh.faces(2, f)).cast<double>();
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    ASSERT_GT(n.norm(), 0.0) << "degenerate face " << f;
+    EXPECT_GT(n.dot((a + b + c) / 3 - centre), 0.0) << "inward face " << f;
+    area += 0.5 * n.norm();
+  }
+  constexpr double p = 1.6075;
+  const double a = sq.size.x(), b = sq.size.y(), c = sq.size.z();
+  const double expected =
+      4 * M_PI * std::pow((std::pow(a * b, p) + std::pow(a * c, p) + std::pow(b * c, p)) / 3, 1 / p);
+  EXPECT_NEAR(area, expected, 0.02 * expected);
+  // A box-like superquadric (small exponents) keeps its faces outward too.
+  sq.e1 = 0.2;
+  sq.e2 = 0.3;
+  const SurfaceMesh boxy = SuperquadricMesh(sq, 16);
+  for (Eigen::Index f = 0; f < boxy.faces.cols(); ++f) {
+    const Eigen::Vector3d a0 = boxy.vertices.col(boxy.faces(0, f)).cast<double>();
+    const Eigen::Vector3d b0 = boxy.vertices.col(boxy.faces(1, f)).cast<double>();
+    const Eigen::Vector3d c0 = boxy.vertices.col(boxy.faces(2, f)).cast<double>();
+    const Eigen::Vector3d n = (b0 - a0).cross(c0 - a0);
+    if (n.norm() < 1e-12) continue;  // flat corners of a box-like shape may collapse
+    EXPECT_GE(n.dot((a0 + b0 + c0) / 3 - centre), 0.0) << "inward face " << f;
+  }
+  Superquadric zero;
+  EXPECT_THAT([&] { SuperquadricMesh(zero, 8); }, ThrowsMessage<std::invalid_argument>(HasSubstr("sq.size")));
+}
+
 TEST(SuperquadricFitTest, BadInput) {
   const SuperquadricFit few = FitSuperquadric(Eigen::Matrix3Xf::Zero(3, 3), {});
   EXPECT_EQ(few.status, SuperquadricStatus::kTooFewPoints);
