@@ -56,6 +56,9 @@ struct Case {
   double scale;
 };
 
+// gtest prints parameters in test listings; without this it dumps the struct's bytes.
+void PrintTo(const Case& c, std::ostream* os) { *os << c.base << " x " << c.scale; }
+
 class UnknownToolTest : public ::testing::TestWithParam<Case> {};
 
 std::string CaseName(const ::testing::TestParamInfo<Case>& info) { return info.param.base; }
