@@ -47,8 +47,9 @@ struct PerceiveOptions {
 /// lists each tool's files. Returns 0 when perception ran (even if some tools were not
 /// analysed: they are recorded with their reason). Throws std::invalid_argument for bad
 /// requests, a missing or corrupt classifier file, or a classifier trained for another library
-/// (naming --no-classifier and --user-tools-unknown as ways out), std::runtime_error when a
-/// file cannot be written.
+/// (with user tools from --tool-dir in the library, the message names --no-classifier and
+/// --user-tools-unknown as ways out), --user-tools-unknown without a --tool-dir, and
+/// std::runtime_error when a file cannot be written.
 int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir, const CaptureOptions& capture,
                 const PerceiveOptions& options);
 
