@@ -547,6 +547,10 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
     }
     y_shift = std::max(y_shift, Support(tool, R, -Eigen::Vector3d::UnitY()));  // parts clear the board
     double x = X_KT.translation().x() + p.offset - (min_x + max_x) / 2;
+    // A long tool lying across at an end place (pos1_rot3, pos3_rot3) would overhang the rack:
+    // it goes as far toward that end as the rack allows.
+    const double half = rack.width / 2 + 0.05;
+    if (max_x - min_x <= 2 * half) x = std::clamp(x, -half - min_x, half - max_x);
     // Keep tools apart: push this one out of any interval already taken, away from the centre.
     for (const auto& [lo, hi] : occupied) {
       if (x + max_x > lo - 0.01 && x + min_x < hi + 0.01) {

@@ -22,7 +22,8 @@ inline constexpr std::string_view kCellNames[] = {"pos1", "pos2", "pos3", "rot0"
 
 /// The extended protocol's cells (design.md: the full 3 x 4 cross product): every place pos1..pos3
 /// with every rotation rot0..rot3, "pos<i>_rot<j>". pos<i>_rot0 is the pose of pos<i>, and
-/// pos2_rot<j> that of rot<j>.
+/// pos2_rot<j> that of rot<j>. A tool too long to lie across (rot3) at an end place is moved
+/// toward the centre until it fits on the rack.
 inline constexpr std::string_view kExtendedCellNames[] = {
     "pos1_rot0", "pos1_rot1", "pos1_rot2", "pos1_rot3", "pos2_rot0", "pos2_rot1",
     "pos2_rot2", "pos2_rot3", "pos3_rot0", "pos3_rot1", "pos3_rot2", "pos3_rot3"};
