@@ -145,9 +145,9 @@ void WriteBarChartPng(const BarChart& chart, const std::filesystem::path& png) {
   const double char_px = kPxPerScale * kTextScale;
   const double slot_px = 0.88 * chart.width_px / static_cast<double>(n);
   const bool vertical = kCharWidth * static_cast<double>(longest) * char_px > 0.95 * slot_px;
-  const double label_chars = vertical ? kCharWidth * static_cast<double>(longest) + 1.0 : 2.0;
+  const double label_chars = vertical ? kCharWidth * static_cast<double>(longest) + 2.2 : 2.0;
   const double char_frac = char_px / chart.height_px;  // one character height as a page fraction
-  const double bottom = std::min(0.6, (label_chars + 3.0) * char_frac);
+  const double bottom = std::min(0.6, (label_chars + 3.4) * char_frac);
   const bool legend = chart.series.size() > 1 || !chart.series.front().label.empty();
   const double top = 1.0 - (legend ? 4.2 : 2.6) * char_frac;
 
