@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <regex>
 
 #include "app/bench_episodes.h"
 #include "app/bench_grasp.h"
@@ -20,22 +19,25 @@ std::vector<BenchProtocol> BenchProtocols() {
   std::vector<BenchProtocol> protocols;
   protocols.push_back(
       {"ik", "Cartesian solver: 500 reachable + 100 unreachable palm poses, default vs plain Ipopt", RunIkBench,
-       nullptr});
+       ReportIk});
   protocols.push_back({"grasp-gt",
                        "Grasp + lift + 2 s hold of every library tool in the 7 Table 5.3 cells, from the "
-                       "ground-truth handle pose",
-                       RunGraspBench, nullptr});
+                       "ground-truth handle pose; summary.md with per-cell and per-tool plots",
+                       RunGraspBench, ReportGrasp});
   protocols.push_back({"pull-gt",
                        "Per library tool (cell rot0): grasp from the ground-truth handle, pull the ball lying out "
                        "of reach toward the robot, put the tool down, grasp the ball",
-                       RunPullBench, nullptr});
+                       RunPullBench, ReportPull});
   protocols.push_back({"table53",
-                       "Perception accuracy: every library tool in the 7 Table 5.3 cells, ours vs the thesis "
-                       "configuration on the same frames; writes table53.md",
+                       "Perception accuracy: every library tool in the 7 Table 5.3 cells (--extended: the 12 "
+                       "of 3 places x 4 rotations), ours vs the thesis configuration on the same frames; "
+                       "--episodes N: N full episodes per cell, perception score + grasp outcome; writes "
+                       "table53.md and plots",
                        RunTable53Bench, ReportTable53});
   protocols.push_back({"random",
-                       "Full episodes (--episodes N) with randomized tools, cells and ball positions: grasp, pull "
-                       "and ball-grasp rates with 95% intervals, stage times; writes summary.md",
+                       "Full episodes (--episodes N, default 50) with randomized tools, cells and ball positions: "
+                       "choice, grasp, pull and ball-grasp rates with 95% intervals, stage times; writes summary.md "
+                       "and plots",
                        RunRandomEpisodesBench, ReportRandomEpisodes});
   return protocols;
 }
@@ -43,6 +45,10 @@ std::vector<BenchProtocol> BenchProtocols() {
 int RunBench(const BenchRequest& request) {
   if (request.shard_count < 1 || request.shard_index < 0 || request.shard_index >= request.shard_count) {
     ThrowInvalid("bench: shard ", request.shard_index, "/", request.shard_count, " is not valid (expected 0 <= i < N)");
+  }
+  if (request.episodes < 0) ThrowInvalid("bench: --episodes ", request.episodes, " (expected >= 0)");
+  if (request.extended && request.protocol != "table53") {
+    ThrowInvalid("bench: --extended applies to protocol table53 only, not '", request.protocol, "'");
   }
   std::string known;
   for (const BenchProtocol& protocol : BenchProtocols()) {
@@ -52,13 +58,37 @@ int RunBench(const BenchRequest& request) {
   ThrowInvalid("bench: unknown protocol '", request.protocol, "' (known: ", known.empty() ? "none yet" : known, ")");
 }
 
-bool Matches(const BenchRequest& request, const std::string& name) {
-  if (request.filter.empty()) return true;
-  try {
-    return std::regex_search(name, std::regex(request.filter));
-  } catch (const std::regex_error& e) {
-    ThrowInvalid("bench: --filter '", request.filter, "' is not a valid regular expression (", e.what(), ")");
+std::vector<SweepCase> ToolCellCases(const std::vector<std::string>& tools, const std::vector<std::string>& cells) {
+  std::vector<SweepCase> cases;
+  for (const std::string& tool : tools) {
+    for (const std::string& cell : cells) {
+      SweepCase c;
+      c.index = static_cast<int>(cases.size());
+      c.id = tool + "/" + cell;
+      c.params = {{"tool", tool}, {"cell", cell}};
+      cases.push_back(std::move(c));
+    }
   }
+  return cases;
+}
+
+std::vector<std::string> SortedToolNames(const std::vector<toollib::ToolModel>& library) {
+  std::vector<std::string> names;
+  for (const auto& t : library) names.push_back(t.name);
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+double Tally::Rate() const { return n > 0 ? static_cast<double>(ok) / n : std::numeric_limits<double>::quiet_NaN(); }
+
+std::pair<double, double> WilsonInterval(int successes, int n) {
+  if (n <= 0) return {0.0, 1.0};
+  const double z = 1.959963984540054;
+  const double p = static_cast<double>(successes) / n;
+  const double denominator = 1 + z * z / n;
+  const double centre = (p + z * z / (2.0 * n)) / denominator;
+  const double half = z * std::sqrt(p * (1 - p) / n + z * z / (4.0 * n * n)) / denominator;
+  return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
 }
 
 SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& protocol, const nlohmann::json& info) {
@@ -103,6 +133,22 @@ int MergeRuns(const std::vector<std::filesystem::path>& dirs, const std::filesys
     return 0;
   }
   ThrowInvalid("merge: results of unknown protocol '", protocol, "'");
+}
+
+BarSeries RateSeries(const std::string& label, const std::vector<Tally>& tallies) {
+  BarSeries series;
+  series.label = label;
+  for (const Tally& t : tallies) {
+    const auto [lo, hi] = WilsonInterval(t.ok, t.n);
+    series.values.push_back(100 * t.Rate());
+    series.low.push_back(t.n > 0 ? 100 * lo : std::numeric_limits<double>::quiet_NaN());
+    series.high.push_back(t.n > 0 ? 100 * hi : std::numeric_limits<double>::quiet_NaN());
+  }
+  return series;
+}
+
+std::string MarkdownImage(const std::string& alt, const std::filesystem::path& png) {
+  return "![" + alt + "](" + png.filename().string() + ")\n";
 }
 
 void WriteJson(const std::filesystem::path& path, const nlohmann::json& value) {

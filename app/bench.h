@@ -5,9 +5,12 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "app/plots.h"
 #include "app/sweep.h"
+#include "toollib/tool_model.h"
 
 namespace toolbench::app {
 
@@ -20,7 +23,9 @@ struct BenchRequest {
   int shard_count = 1;            // >= 1
   int limit = 0;                  // run at most this many cases (0 = all), for quick looks
   std::string filter;             // regex on case ids ("hoe_1/rot.*"); empty = all
-  int episodes = 50;              // episode protocols: how many episodes, >= 1
+  int episodes = 0;               // random: how many episodes (0 = 50); table53: full episodes per
+                                  // cell instead of single frames (0 = perception only), >= 0
+  bool extended = false;          // table53: the 12 cells of the 3 x 4 cross product instead of 7
   double case_timeout_s = 900;    // a case running longer is killed and recorded as failed [s], > 0
   int jobs = 1;                   // cases run at once, each in its own child process, >= 1
   bool resume = false;            // skip cases already recorded in out_dir/results.jsonl
@@ -46,11 +51,6 @@ std::vector<BenchProtocol> BenchProtocols();
 /// Runs the protocol named in the request; throws std::invalid_argument for an unknown name.
 int RunBench(const BenchRequest& request);
 
-/// Whether case `index` belongs to this shard.
-inline bool InShard(const BenchRequest& request, int index) {
-  return index % request.shard_count == request.shard_index;
-}
-
 /// Sweep options from a bench request (out_dir, shard, limit, jobs, resume, isolate); `info`
 /// goes into run.json.
 SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& protocol,
@@ -61,9 +61,33 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
 /// different protocols, a protocol without a report, or malformed results.
 int MergeRuns(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& out_dir);
 
-/// Whether a case named "tool/cell" passes the request's --filter (a regular expression searched
-/// in the name; empty = all). Throws std::invalid_argument for an invalid expression.
-bool Matches(const BenchRequest& request, const std::string& name);
+/// Cases "<tool>/<cell>" for every tool and cell, params {"tool", "cell"}, index = tool index *
+/// cells.size() + cell index (so shards and --resume see the same numbering on every machine).
+std::vector<SweepCase> ToolCellCases(const std::vector<std::string>& tools, const std::vector<std::string>& cells);
+
+/// Names of the library's tools, sorted (the case order of the per-tool protocols).
+std::vector<std::string> SortedToolNames(const std::vector<toollib::ToolModel>& library);
+
+/// Successes out of trials.
+struct Tally {
+  int n = 0;   // trials
+  int ok = 0;  // successes, <= n
+  void Add(bool success) {
+    ++n;
+    ok += success ? 1 : 0;
+  }
+  double Rate() const;  // ok / n; NaN when n = 0
+};
+
+/// 95 % Wilson score interval of a binomial proportion: {low, high}; {0, 1} for n = 0.
+std::pair<double, double> WilsonInterval(int successes, int n);
+
+/// A bar series of success rates in percent with their 95 % Wilson intervals, one per tally
+/// (NaN bars for empty tallies).
+BarSeries RateSeries(const std::string& label, const std::vector<Tally>& tallies);
+
+/// The markdown line that shows a PNG of the same folder: "![alt](file)\n".
+std::string MarkdownImage(const std::string& alt, const std::filesystem::path& png);
 
 /// Writes JSON to a file with a trailing newline (creating folders).
 void WriteJson(const std::filesystem::path& path, const nlohmann::json& value);

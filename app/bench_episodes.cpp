@@ -1,5 +1,6 @@
 #include "app/bench_episodes.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -13,19 +14,10 @@
 
 namespace toolbench::app {
 
-std::pair<double, double> WilsonInterval(int successes, int n) {
-  if (n <= 0) return {0.0, 1.0};
-  const double z = 1.959963984540054;
-  const double p = static_cast<double>(successes) / n;
-  const double denominator = 1 + z * z / n;
-  const double centre = (p + z * z / (2.0 * n)) / denominator;
-  const double half = z * std::sqrt(p * (1 - p) / n + z * z / (4.0 * n * n)) / denominator;
-  return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
-}
-
 int RunRandomEpisodesBench(const BenchRequest& request) {
+  const int episodes = request.episodes > 0 ? request.episodes : 50;
   std::vector<SweepCase> cases;
-  for (int i = 0; i < request.episodes; ++i) {
+  for (int i = 0; i < episodes; ++i) {
     SweepCase c;
     c.index = i;
     c.id = "episode/" + std::to_string(i);
@@ -40,18 +32,16 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     return EpisodeJson(RunEpisode(episode));
   };
   nlohmann::json info;
-  info["episodes"] = request.episodes;
+  info["episodes"] = episodes;
   ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case));
   return 0;
 }
 
 void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLine>& lines) {
-  struct Rate {
-    int ok = 0;
-    int n = 0;
-  };
-  std::map<std::string, Rate> rates;
+  std::map<std::string, Tally> rates;
   std::map<std::string, std::vector<double>> stage_ms;
+  std::map<std::string, std::vector<double>> stage_robot_s;
+  std::vector<std::string> stage_order;  // as the episodes ran them (first seen first)
   std::map<std::string, int> failures;
   std::vector<double> wall_s, displacement;
   int crashed = 0;
@@ -63,11 +53,14 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     }
     const nlohmann::json& r = line["result"];
     const bool needed_tool = !r.value("ball_reachable_at_start", false);
-    auto count = [&](const std::string& name, bool ok) {
-      ++rates[name].n;
-      rates[name].ok += ok ? 1 : 0;
-    };
+    auto count = [&](const std::string& name, bool ok) { rates[name].Add(ok); };
     if (needed_tool) {
+      // choice_made: the choose_tool stage picked a tool; choice_correct when the episode scored
+      // its choice against ground truth (truth.choice_correct).
+      bool chose = false;
+      for (const auto& s : r["stages"]) chose = chose || (s.value("name", "") == "choose_tool" && s.value("ok", false));
+      count("choice_made", chose);
+      if (r["truth"].contains("choice_correct")) count("choice_correct", r["truth"]["choice_correct"].get<bool>());
       count("grasp_success", r.value("grasp_success", false));
       count("pull_success", r.value("pull_success", false));
       count("assisted", r.value("assisted", false));
@@ -76,7 +69,12 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     count("ball_grasp_success", r.value("ball_grasp_success", false));
     count("completed", r.value("failure", std::string()).empty());
     wall_s.push_back(r.value("wall_s", 0.0));
-    for (const auto& s : r["stages"]) stage_ms[s["name"].get<std::string>()].push_back(s["wall_ms"].get<double>());
+    for (const auto& s : r["stages"]) {
+      const std::string name = s["name"];
+      if (!stage_ms.count(name)) stage_order.push_back(name);
+      stage_ms[name].push_back(s["wall_ms"].get<double>());
+      stage_robot_s[name].push_back(s.value("robot_s", 0.0));
+    }
     const std::string failure = r.value("failure", std::string());
     if (!failure.empty()) ++failures[failure.substr(0, failure.find(':'))];
   }
@@ -98,6 +96,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   for (const auto& [name, values] : stage_ms) {
     summary["stage_ms"][name] = {
         {"median", Percentile(values, 50)}, {"p90", Percentile(values, 90)}, {"n", values.size()}};
+    summary["stage_robot_s_median"][name] = Percentile(stage_robot_s[name], 50);
   }
   summary["failures"] = failures;
   WriteJson(request.out_dir / "summary.json", summary);
@@ -110,15 +109,56 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     md << fmt::format("| {} | {:.0f} % | {:.0f}–{:.0f} % | {} |\n", name, rate.n ? 100.0 * rate.ok / rate.n : NAN,
                       100 * lo, 100 * hi, rate.n);
   }
-  md << "\n| stage | median ms | p90 ms |\n|---|---|---|\n";
-  for (const auto& [name, values] : stage_ms) {
-    md << fmt::format("| {} | {:.0f} | {:.0f} |\n", name, Percentile(values, 50), Percentile(values, 90));
+  md << "\n| stage | episodes | wall median ms | wall p90 ms | robot (simulated) median s |\n|---|---|---|---|---|\n";
+  for (const std::string& name : stage_order) {
+    const std::vector<double>& values = stage_ms[name];
+    md << fmt::format("| {} | {} | {:.0f} | {:.0f} | {:.1f} |\n", name, values.size(), Percentile(values, 50),
+                      Percentile(values, 90), Percentile(stage_robot_s[name], 50));
   }
   md << fmt::format("\nWall time per episode: median {:.1f} s, p90 {:.1f} s.\n", Percentile(wall_s, 50),
                     Percentile(wall_s, 90));
   if (!failures.empty()) {
     md << "\n| first failure | episodes |\n|---|---|\n";
     for (const auto& [name, n] : failures) md << "| " << name << " | " << n << " |\n";
+  }
+  // The plots: success rates with their intervals, and how long each stage takes.
+  if (!rates.empty()) {
+    BarChart chart;
+    chart.title = fmt::format("random episodes: success rates (95 % Wilson intervals), {} episodes", lines.size());
+    chart.x_label = "outcome (grasp, pull, assisted, choice: episodes that needed a tool)";
+    chart.y_label = "rate [%]";
+    chart.y_max = 112;
+    chart.value_labels = true;
+    std::vector<Tally> tallies;
+    for (const auto& [name, rate] : rates) {
+      chart.categories.push_back(name);
+      tallies.push_back(rate);
+    }
+    chart.series.push_back(RateSeries("", tallies));
+    WriteBarChartPng(chart, request.out_dir / "rates.png");
+    md << "\n" << MarkdownImage("success rates with 95 % intervals", "rates.png");
+  }
+  if (!stage_ms.empty()) {
+    std::vector<Histogram> panels;
+    for (const std::string& name : stage_order) {
+      const std::vector<double>& values = stage_ms[name];
+      Histogram h;
+      h.title = name;
+      h.x_label = "wall time [s]";
+      h.y_label = "episodes";
+      for (double ms : values) h.values.push_back(ms / 1000);
+      h.bins = std::clamp(static_cast<int>(values.size()) / 2, 5, 20);
+      panels.push_back(h);
+    }
+    Histogram whole;
+    whole.title = "whole episode";
+    whole.x_label = "wall time [s]";
+    whole.y_label = "episodes";
+    whole.values = wall_s;
+    whole.bins = std::clamp(static_cast<int>(wall_s.size()) / 2, 5, 20);
+    panels.push_back(whole);
+    WriteHistogramsPng(panels, request.out_dir / "stage_times.png", 3);
+    md << "\n" << MarkdownImage("stage wall-time histograms", "stage_times.png");
   }
   WriteTextFile(request.out_dir / "summary.md", md.str());
 }

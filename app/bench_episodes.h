@@ -16,7 +16,4 @@ int RunRandomEpisodesBench(const BenchRequest& request);
 /// percentiles, wall time per episode.
 void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLine>& lines);
 
-/// 95 % Wilson score interval of a binomial proportion: {low, high}; {0, 1} for n = 0.
-std::pair<double, double> WilsonInterval(int successes, int n);
-
 }  // namespace toolbench::app

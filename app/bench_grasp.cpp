@@ -3,16 +3,18 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "app/overview.h"
 #include "common/check.h"
+#include "common/paths.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
 
@@ -21,6 +23,44 @@ namespace {
 
 // The failure key of a reason ("slip: 7.1 mm" -> "slip"), for the histogram.
 std::string ReasonKey(const std::string& reason) { return reason.substr(0, reason.find(':')); }
+
+/// summary.md with the success rate per cell and per tool (95 % Wilson intervals), as tables
+/// and as bar charts (per_cell.png, per_tool.png).
+void WriteGraspReport(const std::filesystem::path& out_dir, const nlohmann::json& summary,
+                      const std::map<std::string, Tally>& per_cell, const std::map<std::string, Tally>& per_tool) {
+  std::ostringstream md;
+  md << "# grasp-gt: grasp, lift and hold from the ground-truth handle\n\n"
+     << "Seed " << summary["seed"] << ", " << summary["cases"] << " cases run, " << summary["failed_cases"]
+     << " failed to run (see results.jsonl). Success: " << summary["success_criterion"].get<std::string>()
+     << ".\n\n";
+  auto section = [&](const std::string& what, const std::map<std::string, Tally>& tallies, const std::string& png) {
+    BarChart chart;
+    chart.title = "grasp-gt: grasp success per " + what + " (95 % Wilson intervals)";
+    chart.x_label = what;
+    chart.y_label = "grasp success [%]";
+    chart.y_max = 112;
+    std::vector<Tally> values;
+    md << "| " << what << " | success | 95 % interval | n |\n|---|---|---|---|\n";
+    for (const auto& [name, t] : tallies) {
+      chart.categories.push_back(name);
+      values.push_back(t);
+      const auto [lo, hi] = WilsonInterval(t.ok, t.n);
+      md << fmt::format("| {} | {:.0f} % | {:.0f}–{:.0f} % | {} |\n", name, 100 * t.Rate(), 100 * lo, 100 * hi, t.n);
+    }
+    if (tallies.empty()) return;
+    chart.series.push_back(RateSeries("", values));
+    chart.value_labels = tallies.size() <= 12;
+    WriteBarChartPng(chart, out_dir / png);
+    md << "\n" << MarkdownImage("grasp success per " + what, png) << "\n";
+  };
+  section("cell", per_cell, "per_cell.png");
+  section("tool", per_tool, "per_tool.png");
+  if (!summary["failure_reasons"].empty()) {
+    md << "| failure | cases |\n|---|---|\n";
+    for (const auto& [name, n] : summary["failure_reasons"].items()) md << "| " << name << " | " << n << " |\n";
+  }
+  WriteTextFile(out_dir / "summary.md", md.str());
+}
 
 }  // namespace
 
@@ -137,86 +177,83 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
 int RunGraspBench(const BenchRequest& request) {
   SceneRequest scene_request;
   scene_request.seed = request.seed;
-  const LoadedScene scene = LoadScene(scene_request);
-  std::vector<std::string> tools;
-  for (const auto& t : scene.library) tools.push_back(t.name);
-  std::sort(tools.begin(), tools.end());
-
-  std::filesystem::create_directories(request.out_dir);
-  std::ofstream cases(request.out_dir / "cases.jsonl");
-  if (!cases) ThrowInvalid("bench grasp-gt: cannot write ", (request.out_dir / "cases.jsonl").string());
-  struct Tally {
-    int n = 0;
-    int ok = 0;
+  const LoadedScene scene = LoadScene(scene_request);  // built once; the case processes inherit it
+  std::vector<std::string> cells;
+  for (std::string_view cell : sim::kCellNames) cells.emplace_back(cell);
+  const std::vector<SweepCase> cases = ToolCellCases(SortedToolNames(scene.library), cells);
+  auto run_case = [&](const SweepCase& c) {
+    const std::string tool = c.params.at("tool");
+    const std::string cell = c.params.at("cell");
+    const GraspCaseResult r =
+        RunGraspCase(scene, tool, cell, request.seed, {},
+                     request.frames ? request.out_dir / "frames" / (tool + "_" + cell + ".png") : std::filesystem::path());
+    spdlog::info("grasp-gt {} {}: {} {} (lift {:.3f} m, slip {:.1f} mm, {:.0f} ms)", tool, cell,
+                 r.success ? "ok" : "FAIL", r.reason, r.lift_m, r.slip_m * 1000, r.wall_ms);
+    const Eigen::Vector3d p = r.grasp.X_RP_grasp.translation();
+    return nlohmann::json{{"tool", tool},
+                          {"cell", cell},
+                          {"success", r.success},
+                          {"reason", r.reason},
+                          {"grasp_status", control::ToString(r.grasp.status)},
+                          {"lift_m", r.lift_m},
+                          {"slip_m", r.slip_m},
+                          {"palm_rise_m", r.palm_rise_m},
+                          {"slip_deg", r.slip_rad * 180.0 / M_PI},
+                          {"settled", r.settled},
+                          {"robot_contacts", r.robot_contacts},
+                          {"palm_p_R", {p.x(), p.y(), p.z()}},
+                          {"roll_deg", r.grasp.roll_rad * 180.0 / M_PI},
+                          {"axis_flipped", r.grasp.axis_flipped},
+                          {"slide_m", r.grasp.slide_m},
+                          {"candidates_feasible", r.grasp.candidates_feasible},
+                          {"plan_ms", r.grasp.plan_ms},
+                          {"sim_time_s", r.sim_time},
+                          {"wall_ms", r.wall_ms}};
   };
+  ReportGrasp(request, RunSweep(SweepOptionsFor(request, "grasp-gt"), cases, run_case));
+  return 0;
+}
+
+void ReportGrasp(const BenchRequest& request, const std::vector<SweepLine>& lines) {
   std::map<std::string, Tally> per_tool, per_cell;
   std::map<std::string, int> reasons;
   std::vector<double> wall_ms, sim_s, slip_ok;
   Tally total;
-  int run = 0;
-  const int num_cells = static_cast<int>(std::size(sim::kCellNames));
-  for (int index = 0; index < static_cast<int>(tools.size()) * num_cells; ++index) {
-    if (!InShard(request, index)) continue;
-    const std::string& tool = tools[index / num_cells];
-    const std::string cell(sim::kCellNames[index % num_cells]);
-    if (!Matches(request, tool + "/" + cell)) continue;
-    if (request.limit > 0 && run >= request.limit) break;
-    ++run;
-    const GraspCaseResult r =
-        RunGraspCase(scene, tool, cell, request.seed, {},
-                     request.frames ? request.out_dir / "frames" / (tool + "_" + cell + ".png") : std::filesystem::path());
-    for (Tally* t : {&total, &per_tool[tool], &per_cell[cell]}) {
-      ++t->n;
-      t->ok += r.success ? 1 : 0;
+  int failed = 0;
+  for (const SweepLine& line : lines) {
+    if (!line.value("ok", false)) {
+      ++failed;
+      continue;
     }
-    if (!r.success) ++reasons[ReasonKey(r.reason)];
-    wall_ms.push_back(r.wall_ms);
-    sim_s.push_back(r.sim_time);
-    if (r.success) slip_ok.push_back(r.slip_m);
-    const Eigen::Vector3d p = r.grasp.X_RP_grasp.translation();
-    nlohmann::json line = {{"index", index},
-                           {"tool", tool},
-                           {"cell", cell},
-                           {"success", r.success},
-                           {"reason", r.reason},
-                           {"grasp_status", control::ToString(r.grasp.status)},
-                           {"lift_m", r.lift_m},
-                           {"slip_m", r.slip_m},
-                           {"palm_rise_m", r.palm_rise_m},
-                           {"slip_deg", r.slip_rad * 180.0 / M_PI},
-                           {"settled", r.settled},
-                           {"robot_contacts", r.robot_contacts},
-                           {"palm_p_R", {p.x(), p.y(), p.z()}},
-                           {"roll_deg", r.grasp.roll_rad * 180.0 / M_PI},
-                           {"axis_flipped", r.grasp.axis_flipped},
-                           {"slide_m", r.grasp.slide_m},
-                           {"candidates_feasible", r.grasp.candidates_feasible},
-                           {"plan_ms", r.grasp.plan_ms},
-                           {"sim_time_s", r.sim_time},
-                           {"wall_ms", r.wall_ms}};
-    cases << line.dump() << "\n" << std::flush;
-    spdlog::info("grasp-gt {} {}: {} {} (lift {:.3f} m, slip {:.1f} mm, {:.0f} ms)", tool, cell,
-                 r.success ? "ok" : "FAIL", r.reason, r.lift_m, r.slip_m * 1000, r.wall_ms);
+    const nlohmann::json& r = line["result"];
+    const bool success = r.at("success").get<bool>();
+    for (Tally* t : {&total, &per_tool[r.at("tool").get<std::string>()], &per_cell[r.at("cell").get<std::string>()]}) {
+      t->Add(success);
+    }
+    if (!success) ++reasons[ReasonKey(r.at("reason").get<std::string>())];
+    wall_ms.push_back(r.at("wall_ms").get<double>());
+    sim_s.push_back(r.at("sim_time_s").get<double>());
+    if (success) slip_ok.push_back(r.at("slip_m").get<double>());
   }
-  auto rate = [](const Tally& t) { return t.n > 0 ? static_cast<double>(t.ok) / t.n : std::nan(""); };
   nlohmann::json summary;
   summary["protocol"] = "grasp-gt";
   summary["seed"] = request.seed;
   summary["shard_index"] = request.shard_index;
   summary["shard_count"] = request.shard_count;
   summary["cases"] = total.n;
-  summary["grasp_success_rate"] = rate(total);
+  summary["failed_cases"] = failed;
+  summary["grasp_success_rate"] = total.Rate();
   summary["success_criterion"] =
       "tool >= 5 cm above rest, handle moves < 5 mm in the palm frame and touches only r_* bodies during a 2 s hold";
-  for (const auto& [name, t] : per_tool) summary["per_tool"][name] = rate(t);
-  for (const auto& [name, t] : per_cell) summary["per_cell"][name] = rate(t);
+  for (const auto& [name, t] : per_tool) summary["per_tool"][name] = t.Rate();
+  for (const auto& [name, t] : per_cell) summary["per_cell"][name] = t.Rate();
   summary["failure_reasons"] = nlohmann::json::object();
   for (const auto& [name, n] : reasons) summary["failure_reasons"][name] = n;
   summary["slip_m_median_successful"] = Percentile(slip_ok, 50);
   summary["wall_ms_median"] = Percentile(wall_ms, 50);
   summary["sim_time_s_median"] = Percentile(sim_s, 50);
   WriteJson(request.out_dir / "summary.json", summary);
-  return 0;
+  WriteGraspReport(request.out_dir, summary, per_cell, per_tool);
 }
 
 }  // namespace toolbench::app

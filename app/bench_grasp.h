@@ -57,9 +57,14 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
 
 /// Protocol "grasp-gt": every library tool in each of the 7 cells (pos1 pos2 pos3 rot0 rot1
 /// rot2 rot3), case index = tool index * 7 + cell index, grasped from the ground-truth handle
-/// pose with RunGraspCase. Writes cases.jsonl (tool, cell, success, reason, lift_m, slip_m,
-/// sim_time_s, wall_ms, ...) and summary.json (grasp_success_rate, per_tool, per_cell,
-/// failure_reasons). Honours shard and limit. Returns 0 when the run completed.
+/// pose with RunGraspCase, each case in its own process (RunSweep: results.jsonl lines with tool,
+/// cell, success, reason, lift_m, slip_m, sim_time_s, wall_ms, ...; --jobs, --resume, --shard).
+/// Writes summary.json (grasp_success_rate, per_tool, per_cell, failure_reasons) and summary.md
+/// with per-cell and per-tool bar charts. Returns 0 when the run completed.
 int RunGraspBench(const BenchRequest& request);
+
+/// Writes summary.json, summary.md and its plots from grasp-gt results lines (this run's or
+/// merged shards').
+void ReportGrasp(const BenchRequest& request, const std::vector<SweepLine>& lines);
 
 }  // namespace toolbench::app

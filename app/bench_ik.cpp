@@ -1,7 +1,6 @@
 #include "app/bench_ik.h"
 
 #include <cmath>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -85,76 +84,93 @@ nlohmann::json Summarise(const ConfigStats& s) {
           {"unreachable_solve_ms_median", Percentile(s.unreachable_ms, 50)}};
 }
 
+/// The three solver configurations, in summary order (default first, then the baseline).
+std::vector<std::pair<std::string, control::IkOptions>> Configs() {
+  std::vector<std::pair<std::string, control::IkOptions>> configs(3);
+  configs[0].first = "default";  // pre-solve + rest refinement, Ipopt only when that fails
+  configs[1].first = "baseline_plain_ipopt";  // thesis / iKin-like: Ipopt from the warm start
+  configs[1].second.presolve = false;
+  configs[2].first = "presolve_then_ipopt_polish";  // Ipopt after every pre-solve
+  configs[2].second.polish = true;
+  return configs;
+}
+
 }  // namespace
 
 int RunIkBench(const BenchRequest& request) {
   const robot::RobotDescription robot = robot::LoadRobotDescription(robot::DefaultRobotSidecar());
   const control::KinematicChain chain = control::MakeRightArmChain(robot.model, robot.palm_frame);
   const Eigen::VectorXd q_home = robot.HomeQ();
-
-  struct Config {
-    std::string name;
-    control::IkOptions options;
-  };
-  std::vector<Config> configs(3);
-  configs[0].name = "default";  // pre-solve + rest refinement, Ipopt only when that fails
-  configs[1].name = "baseline_plain_ipopt";  // thesis / iKin-like: Ipopt from the warm start
-  configs[1].options.presolve = false;
-  configs[2].name = "presolve_then_ipopt_polish";  // Ipopt after every pre-solve
-  configs[2].options.polish = true;
+  const auto configs = Configs();
+  // Built once here; the case processes inherit them.
   std::vector<control::CartesianSolver> solvers;
-  for (const Config& config : configs) solvers.emplace_back(chain, q_home, config.options);
-  std::vector<ConfigStats> stats(configs.size());
+  for (const auto& [name, options] : configs) solvers.emplace_back(chain, q_home, options);
 
-  std::filesystem::create_directories(request.out_dir);
-  std::ofstream cases(request.out_dir / "cases.jsonl");
-  if (!cases) ThrowInvalid("bench ik: cannot write ", (request.out_dir / "cases.jsonl").string());
-  int run = 0;
+  std::vector<SweepCase> cases;
   for (int index = 0; index < kReachableCases + kUnreachableCases; ++index) {
-    if (!InShard(request, index)) continue;
-    if (request.limit > 0 && run >= request.limit) break;
-    ++run;
-    const IkCase c = MakeCase(request, chain, q_home, index);
+    SweepCase c;
+    c.index = index;
+    c.id = (index < kReachableCases ? "reachable/" : "unreachable/") + std::to_string(index);
+    cases.push_back(c);
+  }
+  auto run_case = [&](const SweepCase& sweep_case) {
+    const IkCase c = MakeCase(request, chain, q_home, sweep_case.index);
+    const Eigen::Vector3d p = c.X_RT.translation();
+    nlohmann::json out = {{"reachable", c.reachable}, {"target_p_R", {p.x(), p.y(), p.z()}}};
     for (size_t k = 0; k < configs.size(); ++k) {
       const control::IkResult r = solvers[k].Solve(c.X_RT, q_home);
       const bool within = r.position_error_m <= kSuccessPosM && r.orientation_error_rad <= kSuccessRotRad;
-      const bool success = r.status == control::IkStatus::kConverged && within;
-      ConfigStats& s = stats[k];
+      const bool converged = r.status == control::IkStatus::kConverged;
+      // Reachable: converged within tolerance; unreachable: reported as not converged.
+      const bool success = c.reachable ? converged && within : !converged;
       std::string reason;
-      if (c.reachable) {
+      if (!success && c.reachable) reason = converged ? "converged but outside 1 mm / 2 deg" : control::ToString(r.status);
+      if (!success && !c.reachable) reason = "unreachable target reported as converged";
+      nlohmann::json j = {{"status", control::ToString(r.status)},
+                          {"success", success},
+                          {"position_error_m", r.position_error_m},
+                          {"orientation_error_deg", r.orientation_error_rad * 180.0 / M_PI},
+                          {"iterations", r.iterations},
+                          {"ipopt_iterations", r.ipopt_iterations},
+                          {"rest_cost", r.rest_cost},
+                          {"solve_ms", r.solve_ms}};
+      if (!reason.empty()) j["failure"] = reason;
+      out["configs"][configs[k].first] = j;
+    }
+    return out;
+  };
+  ReportIk(request, RunSweep(SweepOptionsFor(request, "ik"), cases, run_case));
+  return 0;
+}
+
+void ReportIk(const BenchRequest& request, const std::vector<SweepLine>& lines) {
+  const auto configs = Configs();
+  std::vector<ConfigStats> stats(configs.size());
+  int failed = 0;
+  for (const SweepLine& line : lines) {
+    if (!line.value("ok", false)) {
+      ++failed;
+      continue;
+    }
+    const nlohmann::json& r = line["result"];
+    const bool reachable = r.at("reachable").get<bool>();
+    for (size_t k = 0; k < configs.size(); ++k) {
+      const nlohmann::json& j = r.at("configs").at(configs[k].first);
+      const bool success = j.at("success").get<bool>();
+      ConfigStats& s = stats[k];
+      if (reachable) {
         ++s.reachable;
         s.succeeded += success ? 1 : 0;
-        s.pos_error_m.push_back(r.position_error_m);
-        s.rot_error_deg.push_back(r.orientation_error_rad * 180.0 / M_PI);
-        s.solve_ms.push_back(r.solve_ms);
-        s.iterations.push_back(r.iterations);
-        if (success) s.rest_cost.push_back(r.rest_cost);
-        if (!success) {
-          reason = r.status != control::IkStatus::kConverged ? control::ToString(r.status)
-                                                             : "converged but outside 1 mm / 2 deg";
-        }
+        s.pos_error_m.push_back(j.at("position_error_m").get<double>());
+        s.rot_error_deg.push_back(j.at("orientation_error_deg").get<double>());
+        s.solve_ms.push_back(j.at("solve_ms").get<double>());
+        s.iterations.push_back(j.at("iterations").get<double>());
+        if (success) s.rest_cost.push_back(j.at("rest_cost").get<double>());
       } else {
         ++s.unreachable;
-        const bool reported = r.status != control::IkStatus::kConverged;
-        s.unreachable_reported += reported ? 1 : 0;
-        s.unreachable_ms.push_back(r.solve_ms);
-        if (!reported) reason = "unreachable target reported as converged";
+        s.unreachable_reported += success ? 1 : 0;
+        s.unreachable_ms.push_back(j.at("solve_ms").get<double>());
       }
-      const Eigen::Vector3d p = c.X_RT.translation();
-      nlohmann::json line = {{"index", index},
-                             {"config", configs[k].name},
-                             {"reachable", c.reachable},
-                             {"target_p_R", {p.x(), p.y(), p.z()}},
-                             {"status", control::ToString(r.status)},
-                             {"success", c.reachable ? success : !(r.status == control::IkStatus::kConverged)},
-                             {"position_error_m", r.position_error_m},
-                             {"orientation_error_deg", r.orientation_error_rad * 180.0 / M_PI},
-                             {"iterations", r.iterations},
-                             {"ipopt_iterations", r.ipopt_iterations},
-                             {"rest_cost", r.rest_cost},
-                             {"solve_ms", r.solve_ms}};
-      if (!reason.empty()) line["failure"] = reason;
-      cases << line.dump() << "\n";
     }
   }
   nlohmann::json summary = Summarise(stats[0]);
@@ -162,12 +178,12 @@ int RunIkBench(const BenchRequest& request) {
   summary["seed"] = request.seed;
   summary["shard_index"] = request.shard_index;
   summary["shard_count"] = request.shard_count;
+  summary["failed_cases"] = failed;
   summary["success_criterion"] = "status converged, position error <= 1 mm, orientation error <= 2 deg";
   summary["warm_start"] = "home posture (RobotDescription::HomeQ)";
-  for (size_t k = 0; k < configs.size(); ++k) summary["configs"][configs[k].name] = Summarise(stats[k]);
+  for (size_t k = 0; k < configs.size(); ++k) summary["configs"][configs[k].first] = Summarise(stats[k]);
   summary["baseline"] = Summarise(stats[1]);
   WriteJson(request.out_dir / "summary.json", summary);
-  return 0;
 }
 
 }  // namespace toolbench::app

@@ -1,5 +1,7 @@
 #pragma once
 
+#include <vector>
+
 #include "app/bench.h"
 
 namespace toolbench::app {
@@ -12,9 +14,12 @@ namespace toolbench::app {
 /// Success = status converged and errors <= 1 mm / 2 deg. Writes summary.json (default's figures
 /// at top level: success_rate, pos_error_median_m, rot_error_median_deg, solve_ms_median,
 /// solve_ms_p90, unreachable_reported_rate, ...; the baseline's under "baseline"; every
-/// configuration under "configs") and cases.jsonl (one line per case and configuration, with
-/// "failure" giving the reason). Honours shard and limit (a case = one target).
-/// Returns 0 when the run completed.
+/// configuration under "configs"). A case = one target ("reachable/<i>", "unreachable/<i>"), run
+/// by RunSweep: one results.jsonl line per target with every configuration's status, errors,
+/// iterations and solve time ("failure" gives the reason). Returns 0 when the run completed.
 int RunIkBench(const BenchRequest& request);
+
+/// Writes summary.json from ik results lines (this run's or merged shards').
+void ReportIk(const BenchRequest& request, const std::vector<SweepLine>& lines);
 
 }  // namespace toolbench::app

@@ -3,16 +3,18 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <spdlog/spdlog.h>
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 
 #include "app/overview.h"
 #include "common/check.h"
+#include "common/paths.h"
 #include "common/rng.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
@@ -20,11 +22,62 @@
 namespace toolbench::app {
 namespace {
 
-// The effector as the pull skill wants it: centre of the effector segment, working direction +x_T,
-// and how far the mesh reaches from the centre along it (the part that meets the ball).
+/// summary.md: per family the pull success rate (95 % Wilson intervals) and the mean ball
+/// displacement, as a table and as bar charts (per_family.png, displacement.png).
+void WritePullReport(const std::filesystem::path& out_dir, const nlohmann::json& summary,
+                     const std::map<std::string, Tally>& per_family) {
+  std::ostringstream md;
+  md << "# pull-gt: pull the ball with each tool from the ground-truth handle\n\n"
+     << "Seed " << summary["seed"] << ", cell " << summary["cell"].get<std::string>() << ", " << summary["cases"]
+     << " tools run, " << summary["failed_cases"] << " failed to run (see results.jsonl). "
+     << summary["success_criterion"].get<std::string>() << ".\n\n"
+     << "| family | pull success | 95 % interval | mean displacement | tool grasped | ball grasped | n |\n"
+     << "|---|---|---|---|---|---|---|\n";
+  BarChart rates;
+  rates.title = "pull-gt: ball brought within reach, per tool family (95 % Wilson intervals)";
+  rates.x_label = "tool family";
+  rates.y_label = "pull success [%]";
+  rates.y_max = 112;
+  rates.value_labels = true;
+  BarChart moved;
+  moved.title = "pull-gt: mean ball displacement toward the robot, per tool family";
+  moved.x_label = "tool family";
+  moved.y_label = "displacement [cm]";
+  moved.value_labels = true;
+  moved.value_decimals = 1;
+  moved.y_min = 0;
+  BarSeries displacement;
+  std::vector<Tally> tallies;
+  for (const auto& [family, t] : per_family) {
+    const nlohmann::json& f = summary["per_family"][family];
+    auto number = [&](const char* key) { return f[key].is_number() ? f[key].get<double>() : std::nan(""); };
+    const auto [lo, hi] = WilsonInterval(t.ok, t.n);
+    auto percent = [](double x) { return std::isnan(x) ? std::string("–") : fmt::format("{:.0f} %", 100 * x); };
+    md << fmt::format("| {} | {} | {:.0f}–{:.0f} % | {:.1f} cm | {} | {} | {} |\n", family, percent(t.Rate()), 100 * lo,
+                      100 * hi, 100 * number("mean_displacement_m"), percent(number("tool_grasp_rate")),
+                      percent(number("ball_grasp_success_rate")), t.n);
+    rates.categories.push_back(family);
+    moved.categories.push_back(family);
+    tallies.push_back(t);
+    displacement.values.push_back(100 * number("mean_displacement_m"));
+    moved.y_min = std::min(moved.y_min, 100 * number("mean_displacement_m") * 1.1);
+  }
+  if (!per_family.empty()) {
+    rates.series.push_back(RateSeries("", tallies));
+    WriteBarChartPng(rates, out_dir / "per_family.png");
+    moved.series.push_back(displacement);
+    WriteBarChartPng(moved, out_dir / "displacement.png");
+    md << "\n" << MarkdownImage("pull success per family", "per_family.png") << "\n"
+       << MarkdownImage("mean displacement per family", "displacement.png") << "\n";
+  }
+  if (!summary["failure_reasons"].empty()) {
+    md << "| failure | cases |\n|---|---|\n";
+    for (const auto& [name, n] : summary["failure_reasons"].items()) md << "| " << name << " | " << n << " |\n";
+  }
+  WriteTextFile(out_dir / "summary.md", md.str());
+}
 
 }  // namespace
-
 void PullCaseOptions::Validate() const {
   if (!sim::IsCellName(cell)) ThrowInvalid("PullCaseOptions: cell = '", cell, "' (expected pos1..pos3, rot0..rot3)");
   if (!(settle_after_s > 0)) ThrowInvalid("PullCaseOptions: settle_after_s = ", settle_after_s, " (expected > 0)");
@@ -156,79 +209,82 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
 int RunPullBench(const BenchRequest& request) {
   SceneRequest scene_request;
   scene_request.seed = request.seed;
-  const LoadedScene scene = LoadScene(scene_request);
-  std::vector<std::string> tools;
-  std::map<std::string, std::string> family;
-  for (const auto& t : scene.library) {
-    tools.push_back(t.name);
-    family[t.name] = t.family;
-  }
-  std::sort(tools.begin(), tools.end());
-  std::filesystem::create_directories(request.out_dir);
-  std::ofstream cases(request.out_dir / "cases.jsonl");
-  if (!cases) ThrowInvalid("bench pull-gt: cannot write ", (request.out_dir / "cases.jsonl").string());
-  struct Tally {
-    int n = 0, in_reach = 0, grasped = 0, pulled = 0, ball_tried = 0, ball_ok = 0;
-    double displacement = 0.0;
-  };
-  std::map<std::string, Tally> per_family;
-  std::map<std::string, int> reasons;
-  Tally total;
-  int run = 0;
+  const LoadedScene scene = LoadScene(scene_request);  // built once; the case processes inherit it
   const PullCaseOptions options;
-  for (int index = 0; index < static_cast<int>(tools.size()); ++index) {
-    if (!InShard(request, index)) continue;
-    const std::string& tool = tools[index];
-    if (!Matches(request, tool + "/" + options.cell)) continue;
-    if (request.limit > 0 && run >= request.limit) break;
-    ++run;
+  const std::vector<SweepCase> cases = ToolCellCases(SortedToolNames(scene.library), {options.cell});
+  auto run_case = [&](const SweepCase& c) {
+    const std::string tool = c.params.at("tool");
     const std::uint64_t seed = DeriveSeed(request.seed, "pull/" + tool);
     const PullCaseResult r =
         RunPullCase(scene, tool, seed, options, request.frames ? request.out_dir / "frames" : std::filesystem::path());
-    for (Tally* t : {&total, &per_family[r.family]}) {
-      ++t->n;
-      t->in_reach += r.ball_in_reach ? 1 : 0;
-      t->grasped += r.grasped ? 1 : 0;
-      t->pulled += r.pull.status == control::PullStatus::kPulled ? 1 : 0;
-      t->ball_tried += r.ball_grasp_tried ? 1 : 0;
-      t->ball_ok += r.ball_grasped ? 1 : 0;
-      t->displacement += r.displacement_m;
-    }
-    if (!r.reason.empty()) ++reasons[r.reason.substr(0, r.reason.find(':'))];
-    auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
-    nlohmann::json line = {{"index", index},
-                           {"tool", tool},
-                           {"family", r.family},
-                           {"seed", seed},
-                           {"grasped", r.grasped},
-                           {"grasp_status", control::ToString(r.grasp.status)},
-                           {"pull_status", control::ToString(r.pull.status)},
-                           {"reason", r.reason},
-                           {"ball_start_R", vec(r.ball_start_R)},
-                           {"ball_end_R", vec(r.ball_end_R)},
-                           {"displacement_m", r.displacement_m},
-                           {"ball_in_reach_before", r.ball_in_reach_before},
-                           {"ball_in_reach", r.ball_in_reach},
-                           {"planned_drag_m", r.pull.planned_drag_m},
-                           {"pull_elevation_deg", r.pull.elevation_rad * 180 / M_PI},
-                           {"pull_yaw_deg", r.pull.yaw_rad * 180 / M_PI},
-                           {"pull_roll_deg", r.pull.roll_rad * 180 / M_PI},
-                           {"pull_candidates_feasible", r.pull.candidates_feasible},
-                           {"pull_candidates_blocked", r.pull.candidates_blocked},
-                           {"pull_start_distance_m", r.pull.start_distance_m},
-                           {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
-                           {"put_down", r.put_down},
-                           {"ball_grasp_tried", r.ball_grasp_tried},
-                           {"ball_grasped", r.ball_grasped},
-                           {"ball_lift_m", r.ball_lift_m},
-                           {"sim_time_s", r.sim_time},
-                           {"wall_ms", r.wall_ms}};
-    cases << line.dump() << "\n" << std::flush;
     spdlog::info("pull-gt {}: ball moved {:.1f} cm toward the robot, {} ({}) [{:.0f} ms]", tool, r.displacement_m * 100,
                  r.ball_in_reach ? "in reach" : "out of reach", r.reason, r.wall_ms);
+    auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
+    return nlohmann::json{{"tool", tool},
+                          {"family", r.family},
+                          {"cell", options.cell},
+                          {"seed", seed},
+                          {"grasped", r.grasped},
+                          {"grasp_status", control::ToString(r.grasp.status)},
+                          {"pull_status", control::ToString(r.pull.status)},
+                          {"reason", r.reason},
+                          {"ball_start_R", vec(r.ball_start_R)},
+                          {"ball_end_R", vec(r.ball_end_R)},
+                          {"displacement_m", r.displacement_m},
+                          {"ball_in_reach_before", r.ball_in_reach_before},
+                          {"ball_in_reach", r.ball_in_reach},
+                          {"planned_drag_m", r.pull.planned_drag_m},
+                          {"pull_elevation_deg", r.pull.elevation_rad * 180 / M_PI},
+                          {"pull_yaw_deg", r.pull.yaw_rad * 180 / M_PI},
+                          {"pull_roll_deg", r.pull.roll_rad * 180 / M_PI},
+                          {"pull_candidates_feasible", r.pull.candidates_feasible},
+                          {"pull_candidates_blocked", r.pull.candidates_blocked},
+                          {"pull_start_distance_m", r.pull.start_distance_m},
+                          {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
+                          {"put_down", r.put_down},
+                          {"ball_grasp_tried", r.ball_grasp_tried},
+                          {"ball_grasped", r.ball_grasped},
+                          {"ball_lift_m", r.ball_lift_m},
+                          {"sim_time_s", r.sim_time},
+                          {"wall_ms", r.wall_ms}};
+  };
+  nlohmann::json info;
+  info["cell"] = options.cell;
+  ReportPull(request, RunSweep(SweepOptionsFor(request, "pull-gt", info), cases, run_case));
+  return 0;
+}
+
+void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines) {
+  struct PullTally {
+    int n = 0, in_reach = 0, grasped = 0, pulled = 0, ball_tried = 0, ball_ok = 0;
+    double displacement = 0.0;
+  };
+  std::map<std::string, PullTally> per_family;
+  std::map<std::string, int> reasons;
+  PullTally total;
+  std::string cell = PullCaseOptions{}.cell;
+  int failed = 0;
+  for (const SweepLine& line : lines) {
+    if (!line.value("ok", false)) {
+      ++failed;
+      continue;
+    }
+    const nlohmann::json& r = line["result"];
+    cell = r.value("cell", cell);
+    for (PullTally* t : {&total, &per_family[r.at("family").get<std::string>()]}) {
+      ++t->n;
+      t->in_reach += r.at("ball_in_reach").get<bool>() ? 1 : 0;
+      t->grasped += r.at("grasped").get<bool>() ? 1 : 0;
+      t->pulled += r.at("pull_status").get<std::string>() == control::ToString(control::PullStatus::kPulled) ? 1 : 0;
+      t->ball_tried += r.at("ball_grasp_tried").get<bool>() ? 1 : 0;
+      t->ball_ok += r.at("ball_grasped").get<bool>() ? 1 : 0;
+      t->displacement += r.at("displacement_m").get<double>();
+    }
+    const std::string reason = r.at("reason").get<std::string>();
+    if (!reason.empty()) ++reasons[reason.substr(0, reason.find(':'))];
   }
   auto ratio = [](int k, int n) { return n > 0 ? static_cast<double>(k) / n : std::nan(""); };
-  auto tally_json = [&](const Tally& t) {
+  auto tally_json = [&](const PullTally& t) {
     return nlohmann::json{{"cases", t.n},
                           {"mean_displacement_m", t.n > 0 ? t.displacement / t.n : std::nan("")},
                           {"pull_success_rate", ratio(t.in_reach, t.n)},
@@ -241,7 +297,8 @@ int RunPullBench(const BenchRequest& request) {
   summary["seed"] = request.seed;
   summary["shard_index"] = request.shard_index;
   summary["shard_count"] = request.shard_count;
-  summary["cell"] = options.cell;
+  summary["failed_cases"] = failed;
+  summary["cell"] = cell;
   summary["success_criterion"] =
       "pull success: after the pull the ball is within reach, i.e. a palm pose grasping it from above (or tilted "
       "toward the robot up to 57 deg) has a converged IK from the home posture; displacement = ball motion along the "
@@ -251,7 +308,9 @@ int RunPullBench(const BenchRequest& request) {
   summary["failure_reasons"] = nlohmann::json::object();
   for (const auto& [name, n] : reasons) summary["failure_reasons"][name] = n;
   WriteJson(request.out_dir / "summary.json", summary);
-  return 0;
+  std::map<std::string, Tally> family_tallies;
+  for (const auto& [name, t] : per_family) family_tallies[name] = Tally{t.n, t.in_reach};
+  WritePullReport(request.out_dir, summary, family_tallies);
 }
 
 }  // namespace toolbench::app

@@ -63,9 +63,14 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
                            const PullCaseOptions& options = {}, const std::filesystem::path& frames_dir = {});
 
 /// Protocol "pull-gt": every library tool (sorted by name; case index = tool index), seed of
-/// case i = DeriveSeed(request seed, "pull/<tool>"). Writes cases.jsonl and summary.json:
-/// pull_success_rate (ball ends within reach, BallInReach), per-family mean displacement toward
-/// the robot and success rate, ball-grasp success. Honours shard and limit.
+/// case i = DeriveSeed(request seed, "pull/<tool>"), each case in its own process (RunSweep:
+/// results.jsonl, --jobs, --resume, --shard). Writes summary.json: pull_success_rate (ball ends
+/// within reach, BallInReach), per-family mean displacement toward the robot and success rate,
+/// ball-grasp success; and summary.md with per-family bar charts.
 int RunPullBench(const BenchRequest& request);
+
+/// Writes summary.json, summary.md and its plots from pull-gt results lines (this run's or
+/// merged shards').
+void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines);
 
 }  // namespace toolbench::app

@@ -296,6 +296,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec));
       rack_frame = see();
       analysis = analyzer.Analyze(rack_frame);
+      result.analysis = analysis;
       int ok = 0;
       s.details["tools"] = nlohmann::json::array();
       for (size_t i = 0; i < analysis.tools.size(); ++i) {

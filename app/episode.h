@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/scene_setup.h"
+#include "perception/analysis.h"
 
 namespace toolbench::app {
 
@@ -49,6 +50,9 @@ struct EpisodeResult {
   double wall_s = 0.0;
   double robot_s = 0.0;
   nlohmann::json truth = nlohmann::json::object();  // ground truth used for scoring
+  /// What perceive_tools saw of the rack (empty when the stage did not run): for benchmarks that
+  /// score perception inside the episode (table53 --episodes). Not part of EpisodeJson.
+  perception::FrameAnalysis analysis;
 };
 
 /// Runs one episode (thesis Alg. 6): observation pose on the table, ball detection, reachable?

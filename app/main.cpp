@@ -237,10 +237,15 @@ int main(int argc, char** argv) {
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
     bench->add_option("--filter", bench_request.filter,
-                      "Only cases whose id matches this regular expression (ids: table53 'hoe_1/rot2')");
-    bench->add_option("--episodes", bench_request.episodes, "Episode protocols (random): how many episodes")
-        ->check(CLI::PositiveNumber)
-        ->capture_default_str();
+                      "Only cases whose id matches this regular expression (ids: 'hoe_1/rot2' for table53 and "
+                      "grasp-gt, 'hoe_1/rot0' pull-gt, 'episode/7' random, 'reachable/12' ik)");
+    bench
+        ->add_option("--episodes", bench_request.episodes,
+                     "random: how many episodes (default 50); table53: run N full episodes per cell (perception "
+                     "score + grasp outcome) instead of single frames")
+        ->check(CLI::PositiveNumber);
+    bench->add_flag("--extended", bench_request.extended,
+                    "table53: all 3 places x 4 rotations (12 cells, pos<i>_rot<j>) instead of the thesis's 7");
     bench
         ->add_option("--case-timeout", bench_request.case_timeout_s,
                      "Kill a case running longer than this and record it as failed [s]")
@@ -254,7 +259,8 @@ int main(int argc, char** argv) {
         "--no-isolate", [&](std::int64_t) { bench_request.isolate = false; },
         "Run cases in this process instead of child processes (for a debugger)");
     bench->add_flag("--frames", bench_request.frames,
-                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt)");
+                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt), or each "
+                    "episode's images to --out/episodes (table53 --episodes)");
   }
 
   std::vector<std::filesystem::path> merge_dirs;

@@ -289,7 +289,8 @@ std::vector<SweepLine> RunSweep(const SweepOptions& options, const std::vector<S
       }
       running.erase(std::remove_if(running.begin(), running.end(), [](const Child& c) { return c.pid < 0; }),
                     running.end());
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      // Short cases (ik: milliseconds) should not wait long for their slot.
+      std::this_thread::sleep_for(std::chrono::milliseconds(running.empty() ? 0 : 3));
     }
   }
   out.close();

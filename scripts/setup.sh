@@ -13,6 +13,7 @@ packages=(
   liburdfdom-dev liburdfdom-headers-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev
+  libplplot-dev plplot-driver-cairo   # report plots (PNG through cairo)
 )
 
 missing=()

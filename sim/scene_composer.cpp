@@ -243,7 +243,9 @@ std::string PartGeom(const toollib::CollisionPart& part, const std::string& name
 }  // namespace
 
 bool IsCellName(std::string_view cell) {
-  return std::find(std::begin(kCellNames), std::end(kCellNames), cell) != std::end(kCellNames);
+  return std::find(std::begin(kCellNames), std::end(kCellNames), cell) != std::end(kCellNames) ||
+         std::find(std::begin(kExtendedCellNames), std::end(kExtendedCellNames), cell) !=
+             std::end(kExtendedCellNames);
 }
 
 Eigen::Isometry3d LookAtFrame(const Eigen::Vector3d& p_eye, const Eigen::Vector3d& p_target) {
@@ -273,19 +275,23 @@ Eigen::Isometry3d RackPose(const RackSpec& rack) {
 
 Eigen::Isometry3d CellPose(const RackSpec& rack, std::string_view cell) {
   if (!IsCellName(cell)) {
-    ThrowInvalid("CellPose: unknown cell '", cell, "' (known: pos1 pos2 pos3 rot0 rot1 rot2 rot3)");
+    ThrowInvalid("CellPose: unknown cell '", cell,
+                 "' (known: pos1 pos2 pos3 rot0 rot1 rot2 rot3, and pos<1-3>_rot<0-3>)");
   }
+  // A cell is a place and a rotation: "posN" (rot0), "rotN" (pos2) or "posN_rotM".
+  const std::string_view place = cell.substr(0, 3) == "pos" ? cell.substr(0, 4) : "pos2";
+  const std::string_view rotation = cell.substr(0, 3) == "rot" ? cell : cell.size() > 5 ? cell.substr(5) : "rot0";
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
   double slot = rack.slot_pos2;
-  if (cell == "pos1") slot = rack.slot_pos1;
-  if (cell == "pos3") slot = rack.slot_pos3;
+  if (place == "pos1") slot = rack.slot_pos1;
+  if (place == "pos3") slot = rack.slot_pos3;
   X.translation() = Eigen::Vector3d(slot, 0, 0);
   // rot0 / posN: tool axis z_T up the board (z_K), effector x_T along the rack (x_K).
   const Eigen::Vector3d z_K = Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d y_K = Eigen::Vector3d::UnitY();  // rack normal, toward the robot
-  if (cell == "rot1") X.linear() = AxisAngle(z_K, std::numbers::pi / 2);   // effector -> robot
-  if (cell == "rot2") X.linear() = AxisAngle(y_K, std::numbers::pi);       // upside down
-  if (cell == "rot3") X.linear() = AxisAngle(y_K, -std::numbers::pi / 2);  // across, effector up
+  if (rotation == "rot1") X.linear() = AxisAngle(z_K, std::numbers::pi / 2);   // effector -> robot
+  if (rotation == "rot2") X.linear() = AxisAngle(y_K, std::numbers::pi);       // upside down
+  if (rotation == "rot3") X.linear() = AxisAngle(y_K, -std::numbers::pi / 2);  // across, effector up
   return X;
 }
 
@@ -312,9 +318,9 @@ ScenePlan PlanScene(const SceneSpec& spec, const std::vector<std::string>& libra
       require_tool(p.tool);
       if (!IsCellName(p.cell)) {
         ThrowInvalid("PlanScene: unknown cell '", p.cell,
-                     "' for tool '", p.tool, "' (known: pos1 pos2 pos3 rot0 rot1 rot2 rot3)");
+                     "' for tool '", p.tool, "' (known: pos1 pos2 pos3 rot0 rot1 rot2 rot3, pos<1-3>_rot<0-3>)");
       }
-      const std::string place = p.cell.rfind("pos", 0) == 0 ? p.cell : "pos2";
+      const std::string place = p.cell.rfind("pos", 0) == 0 ? p.cell.substr(0, 4) : "pos2";
       if (!places.insert(place).second) {
         ThrowInvalid("PlanScene: two tools requested at place '", place,
                      "' (rot0..rot3 all use the central place pos2)");
@@ -541,6 +547,10 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
     }
     y_shift = std::max(y_shift, Support(tool, R, -Eigen::Vector3d::UnitY()));  // parts clear the board
     double x = X_KT.translation().x() + p.offset - (min_x + max_x) / 2;
+    // A long tool lying across at an end place (pos1_rot3, pos3_rot3) would overhang the rack:
+    // it goes as far toward that end as the rack allows.
+    const double half = rack.width / 2 + 0.05;
+    if (max_x - min_x <= 2 * half) x = std::clamp(x, -half - min_x, half - max_x);
     // Keep tools apart: push this one out of any interval already taken, away from the centre.
     for (const auto& [lo, hi] : occupied) {
       if (x + max_x > lo - 0.01 && x + min_x < hi + 0.01) {

@@ -20,13 +20,21 @@ namespace toolbench::sim {
 inline constexpr std::string_view kCellNames[] = {"pos1", "pos2", "pos3", "rot0",
                                                   "rot1", "rot2", "rot3"};
 
-/// True when `cell` is one of kCellNames.
+/// The extended protocol's cells (design.md: the full 3 x 4 cross product): every place pos1..pos3
+/// with every rotation rot0..rot3, "pos<i>_rot<j>". pos<i>_rot0 is the pose of pos<i>, and
+/// pos2_rot<j> that of rot<j>. A tool too long to lie across (rot3) at an end place is moved
+/// toward the centre until it fits on the rack.
+inline constexpr std::string_view kExtendedCellNames[] = {
+    "pos1_rot0", "pos1_rot1", "pos1_rot2", "pos1_rot3", "pos2_rot0", "pos2_rot1",
+    "pos2_rot2", "pos2_rot3", "pos3_rot0", "pos3_rot1", "pos3_rot2", "pos3_rot3"};
+
+/// True when `cell` is one of kCellNames or kExtendedCellNames.
 bool IsCellName(std::string_view cell);
 
 /// Where one tool goes.
 struct ToolPlacement {
   std::string tool;    // library model name
-  std::string cell;    // one of kCellNames
+  std::string cell;    // one of kCellNames or kExtendedCellNames
   double offset = 0;   // extra shift along the rack x_K [m]
   double spin = 0;     // extra rotation about the tool's own axis z_T [rad], toward the robot
 };

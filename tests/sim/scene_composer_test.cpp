@@ -89,6 +89,33 @@ TEST_F(ComposerTest, CellPosesFollowTable53) {
   EXPECT_LT(RackPose(rack).linear().col(1).dot(rack.origin.normalized()), -0.8);
 }
 
+TEST_F(ComposerTest, ExtendedCellsCombineAPlaceWithARotation) {
+  const RackSpec& rack = spec_->rack;
+  for (const char* place : {"pos1", "pos2", "pos3"}) {
+    for (const char* rotation : {"rot0", "rot1", "rot2", "rot3"}) {
+      const std::string cell = std::string(place) + "_" + rotation;
+      EXPECT_TRUE(IsCellName(cell)) << cell;
+      const Eigen::Isometry3d X = CellPose(rack, cell);
+      EXPECT_TRUE(X.linear().isApprox(CellPose(rack, rotation).linear())) << cell;
+      EXPECT_NEAR(X.translation().x(), CellPose(rack, place).translation().x(), 1e-12) << cell;
+    }
+  }
+  EXPECT_EQ(std::size(kExtendedCellNames), 12u);
+  // Every tool fits the rack alone in every extended cell (table53 --extended runs them all).
+  for (const auto& tool : *library_) {
+    for (std::string_view cell : kExtendedCellNames) {
+      const ScenePlan plan = PlanScene(*spec_, names_, 3, {{tool.name, std::string(cell)}});
+      EXPECT_NO_THROW(ComposeScene(*spec_, *robot_, *library_, plan)) << tool.name << " " << cell;
+    }
+  }
+  EXPECT_FALSE(IsCellName("pos4_rot1"));
+  EXPECT_FALSE(IsCellName("pos1_rot"));
+  EXPECT_THAT([&] { CellPose(rack, "pos1_rot9"); }, ThrowsMessage<std::invalid_argument>(HasSubstr("pos1_rot9")));
+  // Two extended cells at one place are two tools in one place.
+  EXPECT_THAT([&] { PlanScene(*spec_, names_, 1, {{names_[0], "pos1_rot1"}, {names_[1], "pos1_rot2"}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("pos1")));
+}
+
 TEST_F(ComposerTest, EveryToolInEveryCellComposesAndLoads) {
   // One tool per scene keeps this fast; placements must put every tool on the ledge in front of
   // the board (z_K >= 0, y_K >= 0 for all its geometry).

@@ -1,0 +1,210 @@
+#include "app/bench.h"
+
+#include <fstream>
+#include <stdexcept>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "app/bench_grasp.h"
+#include "app/bench_ik.h"
+#include "app/bench_pull.h"
+#include "app/plots.h"
+
+// PLplot's cairo driver leaves fontconfig's caches and libltdl's driver handles allocated at exit
+// (library-global state, not ours); LeakSanitizer (the sanitizer build) is told to ignore those two
+// libraries only. Without a sanitizer this hook is never called.
+extern "C" const char* __lsan_default_suppressions() { return "leak:libfontconfig.so\nleak:libltdl.so\n"; }
+
+namespace toolbench::app {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+std::filesystem::path TempDir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("toolbench_bench_" + name);
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+nlohmann::json ReadJson(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  return nlohmann::json::parse(in);
+}
+
+std::string ReadText(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST(BenchTest, ToolCellCasesNumberToolsMajor) {
+  const auto cases = ToolCellCases({"a", "b"}, {"pos1", "rot2", "pos3_rot1"});
+  ASSERT_EQ(cases.size(), 6u);
+  EXPECT_EQ(cases[4].index, 4);
+  EXPECT_EQ(cases[4].id, "b/rot2");
+  EXPECT_EQ(cases[4].params["tool"], "b");
+  EXPECT_EQ(cases[5].params["cell"], "pos3_rot1");
+}
+
+TEST(BenchTest, WilsonIntervalMatchesTheFormula) {
+  // 8 of 10: p = 0.8, z = 1.96 -> [0.490, 0.943] (Wilson 1927, standard tables).
+  const auto [lo, hi] = WilsonInterval(8, 10);
+  EXPECT_NEAR(lo, 0.4902, 1e-3);
+  EXPECT_NEAR(hi, 0.9433, 1e-3);
+  EXPECT_EQ(WilsonInterval(0, 0), std::make_pair(0.0, 1.0));
+  const auto [lo0, hi0] = WilsonInterval(0, 20);
+  EXPECT_EQ(lo0, 0.0);
+  EXPECT_GT(hi0, 0.1);
+  Tally t;
+  t.Add(true);
+  t.Add(false);
+  EXPECT_DOUBLE_EQ(t.Rate(), 0.5);
+  EXPECT_TRUE(std::isnan(Tally{}.Rate()));
+  const BarSeries s = RateSeries("x", {t, Tally{}});
+  EXPECT_DOUBLE_EQ(s.values[0], 50.0);
+  EXPECT_LT(s.low[0], 50.0);
+  EXPECT_GT(s.high[0], 50.0);
+  EXPECT_TRUE(std::isnan(s.values[1]) && std::isnan(s.low[1]));
+}
+
+TEST(PlotsTest, BarChartAndHistogramsArePngsOfTheRequestedSize) {
+  const auto dir = TempDir("plots");
+  BarChart chart;
+  chart.title = "rates";
+  chart.x_label = "cell";
+  chart.y_label = "success [%]";
+  chart.categories = {"pos1", "pos2", "rot#1"};
+  chart.series = {{"ours", {10, 50, 90}, {5, 40, 80}, {20, 60, 95}}, {"thesis", {20, std::nan(""), 70}, {}, {}}};
+  chart.value_labels = true;
+  chart.width_px = 640;
+  chart.height_px = 400;
+  WriteBarChartPng(chart, dir / "bars.png");
+  const cv::Mat bars = cv::imread((dir / "bars.png").string());
+  ASSERT_FALSE(bars.empty());
+  EXPECT_EQ(bars.cols, 640);
+  EXPECT_EQ(bars.rows, 400);
+  // Something was drawn: not a blank page.
+  cv::Scalar mean = cv::mean(bars);
+  EXPECT_LT(mean[0], 250.0);
+
+  Histogram h;
+  h.title = "stage";
+  h.x_label = "wall time [s]";
+  h.values = {1, 2, 2, 3, 3, 3, std::nan("")};
+  Histogram empty;
+  empty.title = "never ran";
+  WriteHistogramsPng({h, h, empty}, dir / "hist.png", 2, 300, 250);
+  const cv::Mat hist = cv::imread((dir / "hist.png").string());
+  ASSERT_FALSE(hist.empty());
+  EXPECT_EQ(hist.cols, 600);
+  EXPECT_EQ(hist.rows, 500);
+}
+
+TEST(PlotsTest, BadChartsAreNamed) {
+  const auto dir = TempDir("plots_bad");
+  BarChart chart;
+  chart.title = "broken";
+  EXPECT_THAT([&] { WriteBarChartPng(chart, dir / "a.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("no categories")));
+  chart.categories = {"a", "b"};
+  chart.series = {{"s", {1.0}, {}, {}}};
+  EXPECT_THAT([&] { WriteBarChartPng(chart, dir / "a.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("1 values for 2 categories")));
+  chart.series = {{"s", {1.0, 2.0}, {0.5}, {1.5}}};
+  EXPECT_THAT([&] { WriteBarChartPng(chart, dir / "a.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("interval")));
+  chart.series = {{"s", {1.0, 2.0}, {}, {}}};
+  chart.width_px = 50;
+  EXPECT_THAT([&] { WriteBarChartPng(chart, dir / "a.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("image size")));
+  Histogram h;
+  h.bins = 0;
+  EXPECT_THAT([&] { WriteHistogramsPng({h}, dir / "h.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("bins = 0")));
+  EXPECT_THAT([&] { WriteHistogramsPng({}, dir / "h.png"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("no panels")));
+}
+
+SweepLine GraspLine(int index, const std::string& tool, const std::string& cell, bool success,
+                    const std::string& reason) {
+  return {{"protocol", "grasp-gt"},
+          {"index", index},
+          {"id", tool + "/" + cell},
+          {"ok", true},
+          {"result",
+           {{"tool", tool},
+            {"cell", cell},
+            {"success", success},
+            {"reason", reason},
+            {"wall_ms", 100.0},
+            {"sim_time_s", 5.0},
+            {"slip_m", 0.001}}}};
+}
+
+TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
+  BenchRequest request;
+  request.out_dir = TempDir("grasp_report");
+  std::vector<SweepLine> lines = {GraspLine(0, "hoe_1", "pos1", true, ""),
+                                  GraspLine(1, "hoe_1", "rot2", false, "slip: 6 mm"),
+                                  GraspLine(2, "rake_1", "pos1", true, ""),
+                                  GraspLine(3, "rake_1", "rot2", true, "")};
+  lines.push_back({{"protocol", "grasp-gt"}, {"index", 4}, {"id", "x/pos1"}, {"ok", false}, {"error", "crashed"}});
+  ReportGrasp(request, lines);
+  const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
+  EXPECT_EQ(summary["cases"], 4);
+  EXPECT_EQ(summary["failed_cases"], 1);
+  EXPECT_DOUBLE_EQ(summary["grasp_success_rate"].get<double>(), 0.75);
+  EXPECT_DOUBLE_EQ(summary["per_cell"]["rot2"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(summary["per_tool"]["rake_1"].get<double>(), 1.0);
+  EXPECT_EQ(summary["failure_reasons"]["slip"], 1);
+  const std::string md = ReadText(request.out_dir / "summary.md");
+  EXPECT_THAT(md, HasSubstr("![grasp success per cell](per_cell.png)"));
+  EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_cell.png"));
+  EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_tool.png"));
+}
+
+TEST(BenchReportTest, IkReportSeparatesReachableAndUnreachableTargets) {
+  BenchRequest request;
+  request.out_dir = TempDir("ik_report");
+  auto config = [](bool success, double ms) {
+    return nlohmann::json{{"status", success ? "converged" : "max_iterations"},
+                          {"success", success},
+                          {"position_error_m", success ? 1e-4 : 0.1},
+                          {"orientation_error_deg", 0.1},
+                          {"iterations", 5},
+                          {"rest_cost", 0.2},
+                          {"solve_ms", ms}};
+  };
+  auto line = [&](int index, bool reachable, bool success) {
+    nlohmann::json configs;
+    for (const char* name : {"default", "baseline_plain_ipopt", "presolve_then_ipopt_polish"}) {
+      configs[name] = config(success, 2.0);
+    }
+    return SweepLine{{"protocol", "ik"},
+                     {"index", index},
+                     {"id", std::to_string(index)},
+                     {"ok", true},
+                     {"result", {{"reachable", reachable}, {"configs", configs}}}};
+  };
+  ReportIk(request, {line(0, true, true), line(1, true, false), line(2, false, true)});
+  const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
+  EXPECT_EQ(summary["reachable_cases"], 2);
+  EXPECT_DOUBLE_EQ(summary["success_rate"].get<double>(), 0.5);
+  EXPECT_EQ(summary["unreachable_cases"], 1);
+  EXPECT_DOUBLE_EQ(summary["unreachable_reported_rate"].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(summary["baseline"]["success_rate"].get<double>(), 0.5);
+}
+
+TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
+  BenchRequest request;
+  request.protocol = "grasp-gt";
+  request.out_dir = TempDir("extended");
+  request.extended = true;
+  EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--extended")));
+}
+
+}  // namespace
+}  // namespace toolbench::app
