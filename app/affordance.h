@@ -66,9 +66,12 @@ struct AffordanceTrainOptions {
   /// RBF length scales [standardised feature units], each > 0.
   std::vector<double> length_scales{1.0, 1.5, 2.0, 3.0, 4.5, 7.0};
   /// Signal variance as a fraction of the targets' variance, each > 0.
-  std::vector<double> signal_fractions{0.3, 1.0, 3.0};
-  /// Noise variance as a fraction of the targets' variance, each > 0.
-  std::vector<double> noise_fractions{0.02, 0.05, 0.1, 0.2, 0.4};
+  std::vector<double> signal_fractions{0.1, 0.3, 1.0, 3.0};
+  /// Noise variance as a fraction of the targets' variance, each > 0. The grid reaches past 1 so
+  /// that "the features explain (almost) nothing" is a hypothesis the likelihood can pick: the
+  /// GP then stays near the mean instead of fitting noise (exploration outcomes are noisy: a
+  /// skill that fails, a ball knocked off the table).
+  std::vector<double> noise_fractions{0.02, 0.05, 0.1, 0.2, 0.4, 1.0, 3.0};
   /// Smallest standard deviation a feature is divided by when standardised [feature units], > 0:
   /// a feature that hardly varies in the training set is not blown up to unit scale.
   double min_feature_scale = 1e-3;

@@ -199,9 +199,17 @@ nlohmann::json TrainFromExploration(const std::filesystem::path& results_jsonl, 
   for (AffordanceSample& s : ReadAffordanceSamples(results_jsonl)) {
     if (wanted(tools_wanted, s.tool) && wanted(actions_wanted, s.action)) samples.push_back(std::move(s));
   }
+  // An action with a single labelled trial cannot be trained (nor evaluated): left out, said so.
+  std::map<std::string, int> per_action;
+  for (const AffordanceSample& s : samples) ++per_action[s.action];
+  std::erase_if(samples, [&](const AffordanceSample& s) {
+    if (per_action[s.action] >= 2) return false;
+    spdlog::warn("explore: action '{}' has {} labelled trial: left out of the model", s.action, per_action[s.action]);
+    return true;
+  });
   if (samples.size() < 2) {
     ThrowInvalid("explore: ", results_jsonl.string(), " holds ", samples.size(),
-                 " labelled trial(s); at least 2 are needed to train");
+                 " usable labelled trial(s) of the selected tools and actions (an action needs at least 2)");
   }
   AffordanceModel model = AffordanceModel::Train(samples);
   model.info = info;
@@ -302,7 +310,17 @@ int RunExplore(const ExploreRequest& request) {
   std::map<std::string, Tally> per_family_action;
   std::map<std::string, int> reasons;
   Tally total;
+  const std::set<std::string> selected(tools.begin(), tools.end());
   for (const SweepLine& line : lines) {
+    // A resumed folder may hold trials of other tools or actions (an earlier, wider run).
+    const std::string id = line.value("id", "");
+    const std::string line_tool = id.substr(0, id.find('/'));
+    const std::string rest = id.substr(id.find('/') + 1);
+    const std::string line_action = rest.substr(0, rest.find('/'));
+    if (selected.count(line_tool) == 0 ||
+        std::find(request.actions.begin(), request.actions.end(), line_action) == request.actions.end()) {
+      continue;
+    }
     ++total.trials;
     if (!line.value("ok", false)) {
       ++total.crashed;
