@@ -15,7 +15,7 @@ struct ExploreRequest {
   std::filesystem::path out_dir;  // results.jsonl, affordance_model.json, evaluation.json, ... (created)
   std::string tools;              // ECMAScript regex on library tool names (searched); empty = every tool
   /// Actions explored: "pull", "drag-left", "drag-right", "push" (each at most once).
-  std::vector<std::string> actions{"pull"};
+  std::vector<std::string> actions{"pull", "drag-left", "drag-right", "push"};
   /// Rolls of the tool about the hand's grasp axis [deg], each in [0, 360): 0 = the tool's
   /// working side (+x_T) along x_G (toward the fingertips), 90 = toward the back of the hand,
   /// 180 = toward the wrist, 270 = toward the palm.
