@@ -270,7 +270,7 @@ int main(int argc, char** argv) {
       "--resume continues a run). Then trains the affordance regressor (a Gaussian process per action on "
       "perception's shape features and the in-hand pose) into affordance_model.json and evaluates it on "
       "held-out families and tools against always predicting the mean (evaluation.json, printed). The "
-      "shipped assets/models/affordance_model.json: see README.md");
+      "shipped assets/models/affordance_model.json: see assets/models/README.md");
   AddSeedOption(explore, explore_request.seed);
   explore->add_option("--out", explore_request.out_dir, "Output folder")->required();
   explore->add_option("--tools", explore_request.tools, "Only library tools whose name matches this regex");
