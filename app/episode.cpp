@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <optional>
 #include <memory>
 #include <sstream>
 
@@ -14,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "app/affordance.h"
 #include "app/bench.h"
 #include "app/frame_io.h"
 #include "app/perceive.h"
@@ -105,11 +108,11 @@ void Progress(const EpisodeRequest& request, int index, const StageRecord& stage
   std::fflush(stdout);
 }
 
-/// Expected ball displacement toward the robot of a pull with this tool (interim, geometric):
+/// Expected ball displacement along the action of this tool (geometric, the fallback when no
+/// learned affordance model is available; it was made for the pull):
 /// a tool whose effector protrudes sideways by at least a third of the ball's radius can hook
 /// the ball and bring it the whole planned drag; a straight tool only pushes it aside. Longer
-/// tools reach further behind the ball, so they win ties. The learned model of `toolbench
-/// explore` replaces this (issue 5).
+/// tools reach further behind the ball, so they win ties.
 double PredictPull(const perception::ToolFeatures& f, double ball_radius, double drag_m) {
   const double hook = std::clamp(f.effector_protrusion / (ball_radius / 3.0), 0.0, 1.0);
   return drag_m * (0.1 + 0.9 * hook) + 0.01 * f.total_length;
@@ -157,24 +160,36 @@ cv::Mat DrawBall(const RgbdFrame& frame, const perception::BallDetection& ball) 
   return bgr;
 }
 
-/// Handle frame of the palm's grasp cylinder, in the palm frame P (desc.grasp).
-Eigen::Isometry3d PalmHandleFrame(const robot::RobotDescription& desc) {
-  Eigen::Isometry3d X_PH = Eigen::Isometry3d::Identity();
-  X_PH.linear() =
-      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
-  X_PH.translation() = desc.grasp.center;
-  return X_PH;
-}
-
 }  // namespace
 
+std::filesystem::path DefaultAffordanceModelPath() { return AssetsDir() / "models" / "affordance_model.json"; }
+
 EpisodeResult RunEpisode(const EpisodeRequest& request) {
-  if (request.action != "pull") {
-    ThrowInvalid("episode: action '", request.action, "' is not implemented (implemented: pull)");
+  const std::optional<control::ToolAction> action = control::ParseToolAction(request.action);
+  if (!action) {
+    ThrowInvalid("episode: unknown action '", request.action, "' (expected pull, drag-left, drag-right or push)");
+  }
+  // The learned affordance model; the geometric predictor only when there is no model file.
+  std::optional<AffordanceModel> affordance;
+  std::string choice_note;
+  if (std::filesystem::exists(request.affordance_model)) {
+    affordance = AffordanceModel::Load(request.affordance_model);
+    choice_note = request.affordance_model.string();
+    if (!affordance->HasAction(request.action)) {
+      // A model explored without this action knows nothing about it: as good as no model.
+      affordance.reset();
+      choice_note = "the affordance model '" + request.affordance_model.string() + "' has no '" + request.action +
+                    "' trials: geometric predictor";
+    }
+  } else {
+    choice_note = "no affordance model at '" + request.affordance_model.string() + "': geometric predictor";
   }
   const auto episode_start = Clock::now();
   EpisodeResult result;
   result.seed = request.scene.seed;
+  result.action = request.action;
+  result.choice_method = affordance ? "learned" : "geometric";
+  result.choice_note = choice_note;
   if (!request.out_dir.empty()) std::filesystem::create_directories(request.out_dir);
 
   // ---- Setup: scene, world, robot, eyes. ----
@@ -290,7 +305,6 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 3. Turn to the rack and analyse every tool. ----
     perception::FrameAnalysis analysis;
     RgbdFrame rack_frame;
-    std::vector<double> predicted;
     const perception::ToolAnalyzer analyzer(scene.library, DefaultAnalyzerOptions());
     const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec));
@@ -323,15 +337,40 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     if (!perceived.ok) return finish();
 
     // ---- 4. Predict each tool's effect and choose. ----
-    const control::PullOptions pull_options;
+    control::PullOptions pull_options;
+    pull_options.action = *action;
+    // In-hand rolls the model was explored with: the grasp (and so the roll) is not planned yet,
+    // so a tool's expected effect is its mean over them.
+    std::vector<double> rolls_deg{0.0, 90.0, 180.0, 270.0};
+    if (affordance && affordance->info.contains("orientations_deg")) {
+      rolls_deg = affordance->info.at("orientations_deg").get<std::vector<double>>();
+    }
     run_stage("choose_tool", [&](StageRecord& s) {
-      double best = -1;
+      double best = -std::numeric_limits<double>::infinity();
+      nlohmann::json per_tool = nlohmann::json::array();
       for (size_t i = 0; i < analysis.tools.size(); ++i) {
         const perception::ToolAnalysis& t = analysis.tools[i];
-        const double p = t.status == perception::AnalysisStatus::kOk
-                             ? PredictPull(t.features, ball_radius, pull_options.pull_length_m)
-                             : -1.0;
-        predicted.push_back(p);
+        double p = -std::numeric_limits<double>::infinity();
+        nlohmann::json entry = {{"segment", i}, {"model", t.model}};
+        if (t.status == perception::AnalysisStatus::kOk && affordance) {
+          // Perception's handle frame in T, held at each explored roll.
+          const Eigen::Isometry3d X_TH = t.X_RT.inverse() * t.handle.X_FH;
+          double sum = 0.0;
+          nlohmann::json by_roll = nlohmann::json::object();
+          for (const double roll : rolls_deg) {
+            const Eigen::VectorXd x =
+                AffordanceFeatures(t.parts, t.handle.part, t.features, HeldToolPose(X_TH, roll * M_PI / 180.0));
+            const AffordancePrediction q = affordance->Predict(request.action, x);
+            sum += q.displacement_m;
+            by_roll[fmt::format("{:g}", roll)] = {{"mean_m", q.displacement_m}, {"std_m", q.std_m}};
+          }
+          p = sum / static_cast<double>(rolls_deg.size());
+          entry["by_roll_deg"] = by_roll;
+        } else if (t.status == perception::AnalysisStatus::kOk) {
+          p = PredictPull(t.features, ball_radius, pull_options.pull_length_m);
+        }
+        entry["predicted_displacement_m"] = std::isfinite(p) ? nlohmann::json(p) : nlohmann::json(nullptr);
+        per_tool.push_back(entry);
         if (p > best) {
           best = p;
           result.chosen_segment = static_cast<int>(i);
@@ -341,7 +380,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       result.predicted_displacement_m = best;
       s.ok = true;
       s.outcome = result.chosen_tool;
-      s.details = {{"predicted_displacement_m", predicted}, {"method", "geometric (interim)"}};
+      s.details = {{"action", request.action},
+                   {"method", result.choice_method},
+                   {"note", result.choice_note},
+                   {"tools", per_tool}};
     });
     if (!request.out_dir.empty()) {
       cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
@@ -382,11 +424,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
         const control::HandOverResult h =
             control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
-              world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmHandleFrame(desc) * X_TH.inverse());
+              world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
             });
         result.assisted = true;
         holding = h.holding;
-        X_PT = PalmHandleFrame(desc) * X_TH.inverse();  // where the person put it
+        X_PT = PalmGraspFrame(desc) * X_TH.inverse();  // where the person put it
         s.outcome = "handed_over";
         s.reason = h.holding ? "out of reach: " + g.reason : h.reason;
       }
@@ -396,16 +438,24 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details = {{"tool_lift_m_truth", z1 - z0}, {"assisted", result.assisted}};
     });
     if (!holding) return finish();
+    if (affordance) {
+      // The same model for the tool as it is actually held.
+      const Eigen::Isometry3d X_GT = PalmGraspFrame(desc).inverse() * X_PT;
+      result.predicted_in_hand_m =
+          affordance->Predict(request.action, AffordanceFeatures(tool.parts, tool.handle.part, tool.features, X_GT))
+              .displacement_m;
+    }
 
-    // ---- 6. Pull the ball. ----
+    // ---- 6. The action on the ball (pull, drag, push). ----
     run_stage("pull", [&](StageRecord& s) {
       // The recognised library model's effector geometry (library knowledge, not ground truth).
       const control::ToolEffector effector = EffectorOf(*model);
-      const control::PullResult p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius);
+      const control::PullResult p =
+          control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
       s.ok = p.status == control::PullStatus::kPulled;
       s.outcome = control::ToString(p.status);
       s.reason = p.reason;
-      s.details = {{"planned_drag_m", p.planned_drag_m}};
+      s.details = {{"planned_drag_m", p.planned_drag_m}, {"action", control::ToString(p.action)}};
     });
 
     // ---- 7. Put the tool down on the table, away from the ball. ----
@@ -420,7 +470,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     });
 
     const Eigen::Vector3d ball_now = X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation();
-    result.achieved_displacement_m = ball_start_R.head<2>().norm() - ball_now.head<2>().norm();
+    const Eigen::Vector3d moved(ball_now.x() - ball_start_R.x(), ball_now.y() - ball_start_R.y(), 0.0);
+    result.achieved_displacement_R = moved.head<2>();
+    result.achieved_displacement_m = moved.dot(control::ActionDirection(*action, ball_start_R));
     result.pull_success = control::BallInReach(desc, q_model(), ball_now, ball_radius);
 
     // ---- 8. Look again; grasp the ball when it is now in reach. ----
@@ -451,8 +503,14 @@ nlohmann::json EpisodeJson(const EpisodeResult& r) {
   j["grasp_success"] = r.grasp_success;
   j["pull_success"] = r.pull_success;
   j["ball_grasp_success"] = r.ball_grasp_success;
+  j["action"] = r.action;
+  j["choice_method"] = r.choice_method;
+  j["choice_note"] = r.choice_note;
   j["predicted_displacement_m"] = r.predicted_displacement_m;
+  j["predicted_in_hand_m"] =
+      std::isfinite(r.predicted_in_hand_m) ? nlohmann::json(r.predicted_in_hand_m) : nlohmann::json(nullptr);
   j["achieved_displacement_m"] = r.achieved_displacement_m;
+  j["achieved_displacement_R"] = {r.achieved_displacement_R.x(), r.achieved_displacement_R.y()};
   j["failure"] = r.failure;
   j["wall_s"] = r.wall_s;
   j["robot_s"] = r.robot_s;
@@ -477,9 +535,9 @@ std::string EpisodeSummary(const EpisodeResult& r) {
     out << fmt::format("  {:<20} {:<4} {:<14} {:7.0f} ms {:6.1f} s robot\n", s.name, s.ok ? "ok" : "FAIL", s.outcome,
                        s.wall_ms, s.robot_s);
   }
-  out << fmt::format("  chosen tool {} (predicted {:.2f} m), ball moved {:.2f} m toward the robot\n",
-                     r.chosen_tool.empty() ? "-" : r.chosen_tool, r.predicted_displacement_m,
-                     r.achieved_displacement_m);
+  out << fmt::format("  chosen tool {} ({} choice, predicted {:.2f} m), ball moved {:.2f} m along the {}\n",
+                     r.chosen_tool.empty() ? "-" : r.chosen_tool, r.choice_method, r.predicted_displacement_m,
+                     r.achieved_displacement_m, r.action);
   out << fmt::format("  grasp {}  pull {}  ball grasp {}{}  |  {:.1f} s wall, {:.1f} s robot\n",
                      r.grasp_success ? "yes" : "no", r.pull_success ? "yes" : "no", r.ball_grasp_success ? "yes" : "no",
                      r.assisted ? "  (assisted: hand-over)" : "", r.wall_s, r.robot_s);

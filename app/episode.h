@@ -1,9 +1,11 @@
 #pragma once
 
+#include <cmath>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include "app/scene_setup.h"
@@ -11,10 +13,17 @@
 
 namespace toolbench::app {
 
+/// The shipped affordance model: assets/models/affordance_model.json.
+std::filesystem::path DefaultAffordanceModelPath();
+
 /// What `toolbench episode` was asked to do.
 struct EpisodeRequest {
   SceneRequest scene;             // seed, scene file, tools, cells, user tool folders
-  std::string action = "pull";    // the action on the ball; only "pull" is implemented
+  std::string action = "pull";    // the action on the ball: pull, drag-left, drag-right, push
+  /// The learned affordance model (toolbench explore) that chooses the tool; when the file does
+  /// not exist, or holds no trials of the action, the geometric predictor chooses instead, and
+  /// result.json says so (choice_method, choice_note).
+  std::filesystem::path affordance_model = DefaultAffordanceModelPath();
   std::filesystem::path out_dir;  // result.json and images go here (created); empty = no files
   bool video = false;             // write video.mp4 from the overview camera
   bool quiet = false;             // no progress lines, no summary on stdout
@@ -44,8 +53,19 @@ struct EpisodeResult {
   bool grasp_success = false;             // truth: the chosen tool was lifted off the rack in the hand
   bool pull_success = false;              // truth: the ball ended within reach
   bool ball_grasp_success = false;        // truth: the ball was lifted >= 3 cm in the hand
-  double predicted_displacement_m = 0.0;  // what the choice expected the pull to bring [m]
-  double achieved_displacement_m = 0.0;   // truth: ball moved toward the robot [m]
+  std::string action = "pull";            // the action performed
+  /// How the tool was chosen: "learned" (the affordance model) or "geometric" (fallback)
+  std::string choice_method;
+  std::string choice_note;                // why the fallback, or which model file
+  /// What the choice expected the action to move the ball along its direction [m]: the learned
+  /// model's mean over the explored in-hand rolls (the grasp is not planned yet at the choice).
+  double predicted_displacement_m = 0.0;
+  /// The learned model's expectation once the tool is in the hand, for the actual in-hand pose
+  /// [m]; NaN when not learned or the tool was not held.
+  double predicted_in_hand_m = std::nan("");
+  /// truth: ball displacement along the action's direction (ActionDirection at the ball's start) [m]
+  double achieved_displacement_m = 0.0;
+  Eigen::Vector2d achieved_displacement_R = Eigen::Vector2d::Zero();  // truth: (dx, dy) in R [m]
   std::string failure;                    // first failed stage: "<stage>: <reason>", empty on success
   double wall_s = 0.0;
   double robot_s = 0.0;
@@ -60,7 +80,8 @@ struct EpisodeResult {
 /// its handle (hand-over when it is out of reach, recorded as assisted), pull the ball, put the
 /// tool down, look again and grasp the ball when it is in reach. Writes result.json and images
 /// to request.out_dir when set. Throws std::invalid_argument for bad input (unknown tool,
-/// malformed scene, broken user mesh, unknown action); a stage that fails is a result.
+/// malformed scene, broken user mesh, unknown action, an affordance model file that exists but is
+/// malformed); a stage that fails is a result.
 EpisodeResult RunEpisode(const EpisodeRequest& request);
 
 /// The result as JSON (result.json, one results.jsonl line).

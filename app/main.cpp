@@ -14,6 +14,7 @@
 #include "app/bench.h"
 #include "app/capture.h"
 #include "app/episode.h"
+#include "app/explore.h"
 #include "app/frame_io.h"
 #include "app/perceive.h"
 #include "app/scene_setup.h"
@@ -123,8 +124,16 @@ int main(int argc, char** argv) {
       "recorded as assisted), pull the ball, put the tool down, grasp the ball. Writes result.json, table.png, "
       "rack.png (and video.mp4 with --video) to --out, a summary on stdout");
   AddSceneOptions(episode, episode_request.scene);
-  episode->add_option("--action", episode_request.action, "Action on the ball")
+  episode
+      ->add_option("--action", episode_request.action,
+                   "Action on the ball: pull (toward the robot), drag-left, drag-right (across, to the robot's "
+                   "left/right) or push (away); the tool is chosen for it")
       ->check(CLI::IsMember({"pull", "drag-left", "drag-right", "push"}))
+      ->capture_default_str();
+  episode
+      ->add_option("--affordance-model", episode_request.affordance_model,
+                   "Learned affordance model that chooses the tool (toolbench explore); when the file does not "
+                   "exist or has no trials of --action, the geometric predictor chooses, and result.json says so")
       ->capture_default_str();
   episode->add_option("--out", episode_request.out_dir, "Output folder (default: runs/episode-seed<N>)");
   episode->add_flag("--video", episode_request.video, "Write video.mp4 from the overview camera (slower)");
@@ -263,6 +272,51 @@ int main(int argc, char** argv) {
                     "episode's images to --out/episodes (table53 --episodes)");
   }
 
+  app::ExploreRequest explore_request;
+  CLI::App* explore = cli.add_subcommand(
+      "explore",
+      "Learn tool affordances by exploration in the twin: every library tool (--tools) is handed to the robot "
+      "held at each --orientations roll about the handle, the robot performs each --actions on the ball "
+      "(--balls positions), and the ball's displacement is recorded (results.jsonl, one line per trial; "
+      "--resume continues a run). Then trains the affordance regressor (a Gaussian process per action on "
+      "perception's shape features and the in-hand pose) into affordance_model.json and evaluates it on "
+      "held-out families and tools against always predicting the mean (evaluation.json, printed). The "
+      "shipped assets/models/affordance_model.json: see assets/models/README.md");
+  AddSeedOption(explore, explore_request.seed);
+  explore->add_option("--out", explore_request.out_dir, "Output folder")->required();
+  explore->add_option("--tools", explore_request.tools, "Only library tools whose name matches this regex");
+  explore->add_option("--actions", explore_request.actions, "Actions to explore, comma-separated")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"pull", "drag-left", "drag-right", "push"}))
+      ->capture_default_str();
+  explore
+      ->add_option("--orientations", explore_request.orientations_deg,
+                   "Rolls of the tool about the hand's grasp axis [deg], comma-separated: 0 = working side toward "
+                   "the fingertips, 90 the back of the hand, 180 the wrist, 270 the palm")
+      ->delimiter(',')
+      ->capture_default_str();
+  explore->add_option("--balls", explore_request.balls, "Ball positions per tool, action and orientation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  explore->add_option("--jobs", explore_request.jobs, "Trials run at once, each in its own process")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  explore->add_flag("--resume", explore_request.resume, "Keep --out/results.jsonl and skip the trials it holds");
+  explore->add_option("--limit", explore_request.limit, "Run at most this many trials (0 = all)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  explore
+      ->add_option("--case-timeout", explore_request.case_timeout_s,
+                   "Kill a trial running longer than this and record it as failed [s]")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  explore->add_flag("--train-only", explore_request.train_only,
+                    "Run no trial: train and evaluate from --out/results.jsonl (its trials of the selected tools "
+                    "and actions)");
+  explore->add_flag(
+      "--no-isolate", [&](std::int64_t) { explore_request.isolate = false; },
+      "Run trials in this process instead of child processes (for a debugger)");
+
   std::vector<std::filesystem::path> merge_dirs;
   std::filesystem::path merge_out;
   CLI::App* merge = cli.add_subcommand(
@@ -306,6 +360,7 @@ int main(int argc, char** argv) {
     }
     if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
     if (train->parsed()) return app::RunTrainRecognizer(train_request);
+    if (explore->parsed()) return app::RunExplore(explore_request);
     if (bench->parsed()) {
       const auto slash = shard.find('/');
       try {

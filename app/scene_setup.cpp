@@ -119,6 +119,14 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
   return result;
 }
 
+Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc) {
+  Eigen::Isometry3d X_PG = Eigen::Isometry3d::Identity();
+  X_PG.linear() =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
+  X_PG.translation() = desc.grasp.center;
+  return X_PG;
+}
+
 control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
   control::ToolEffector e;
   e.center_T = model.effector.center;

@@ -71,6 +71,12 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
 /// effector region and of the whole tool.
 control::ToolEffector EffectorOf(const toollib::ToolModel& model);
 
+/// The hand's grasp frame G in the palm frame P: origin at the centre of the cylinder the hand
+/// holds (desc.grasp.center), z_G along its axis (desc.grasp.axis), x_G the palm's x_P turned by
+/// the shortest rotation that takes z_P onto the axis (toward the fingertips for the iCub hand).
+/// A handle held in the hand has its frame H on G up to a roll about z_G.
+Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc);
+
 /// Handle frame H of a tool's handle segment, in T: origin at the handle centre, z_H along the
 /// handle axis (the grasp skills' convention; the rotation about z_H is the shortest turn from z_T).
 Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);

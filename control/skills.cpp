@@ -5,7 +5,9 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/check.h"
@@ -543,11 +545,48 @@ const char* ToString(PullStatus status) {
   return "unknown";
 }
 
-PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
-                      const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
-                      const PullOptions& options) {
+const char* ToString(ToolAction action) {
+  switch (action) {
+    case ToolAction::kPull: return "pull";
+    case ToolAction::kDragLeft: return "drag-left";
+    case ToolAction::kDragRight: return "drag-right";
+    case ToolAction::kPush: return "push";
+  }
+  return "unknown";
+}
+
+std::optional<ToolAction> ParseToolAction(std::string_view name) {
+  for (const ToolAction a : {ToolAction::kPull, ToolAction::kDragLeft, ToolAction::kDragRight, ToolAction::kPush}) {
+    if (name == ToString(a)) return a;
+  }
+  return std::nullopt;
+}
+
+Eigen::Vector3d ActionDirection(ToolAction action, const Eigen::Vector3d& p_RO) {
+  if (!p_RO.allFinite()) ThrowInvalid("ActionDirection: p_RO = (", p_RO.transpose(), ") is not finite");
+  const Eigen::Vector3d pull(-p_RO.x(), -p_RO.y(), 0.0);
+  if (pull.norm() < 1e-3) {
+    ThrowInvalid("ActionDirection: p_RO = (", p_RO.transpose(),
+                 ") is on the robot's vertical axis (expected >= 1 mm from it horizontally)");
+  }
+  const Eigen::Vector3d u = pull.normalized();
+  switch (action) {
+    case ToolAction::kPull: return u;
+    case ToolAction::kPush: return -u;
+    case ToolAction::kDragRight: return Eigen::Vector3d::UnitZ().cross(u);
+    case ToolAction::kDragLeft: return u.cross(Eigen::Vector3d::UnitZ());
+  }
+  ThrowInvalid("ActionDirection: unknown action ", static_cast<int>(action));
+}
+
+PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Isometry3d& X_PT,
+                  const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
+                  const PullOptions& options) {
   options.Validate();
   RequireFinite(X_PT, "PullObject", "X_PT");
+  if (q_model.size() != desc.model.num_q() || !q_model.allFinite()) {
+    ThrowInvalid("PlanPull: q_model has ", q_model.size(), " values (expected ", desc.model.num_q(), ", all finite)");
+  }
   if (!p_RO.allFinite()) ThrowInvalid("PullObject: p_RO = (", p_RO.transpose(), ") is not finite");
   if (!(object_radius > 0)) ThrowInvalid("PullObject: object_radius = ", object_radius, " (expected > 0)");
   if (!effector.center_T.allFinite()) {
@@ -568,7 +607,6 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     ThrowInvalid("PullObject: effector.points_T has ", effector.points_T.cols(), " points, tool_points_T ",
                  effector.tool_points_T.cols(), " (expected both or neither)");
   }
-  RequireHandJoints(robot, desc, "PullObject");
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
@@ -582,19 +620,22 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   loose_options.presolve_restarts = options.ik.presolve_restarts;
   loose_options.max_iterations = options.ik.max_iterations;
   CartesianSolver start_solver(chain, desc.HomeQ(), loose_options);
-  const std::vector<std::string> names = robot.JointNames();
-  const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
+  const Eigen::VectorXd& q_now = q_model;
   const Eigen::Isometry3d X_TP = X_PT.inverse();
 
-  PullResult result;
+  PullPlan plan;
+  PullResult& result = plan.result;
+  result.action = options.action;
   const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
-  Eigen::Vector3d u_straight(-p_RO.x(), -p_RO.y(), 0.0);  // toward the robot's vertical axis
-  if (u_straight.norm() < 1e-6) {
+  if (Eigen::Vector2d(p_RO.x(), p_RO.y()).norm() < 1e-3) {
     result.status = PullStatus::kUnreachable;
-    result.reason = "the object is on the robot's vertical axis: no pull direction";
-    return result;
+    result.reason = "the object is on the robot's vertical axis: no action direction";
+    return plan;
   }
-  u_straight.normalize();
+  const Eigen::Vector3d u_straight = ActionDirection(options.action, p_RO);
+  // The tool reaches out from the robot: orientations are sampled about the horizontal direction
+  // from the robot's axis to the object, whatever the action.
+  const Eigen::Vector3d out_straight = -ActionDirection(ToolAction::kPull, p_RO);
   const bool geometric = effector.points_T.cols() > 0 && effector.tool_points_T.cols() > 0;
   const double support_z = p_RO.z() - object_radius;
   std::vector<KinematicChain> left_arm;  // root -> each fixed left-arm link (torso joints only)
@@ -622,6 +663,7 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   bool planned = false;
   for (const double turn : turns) {
   const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
+  const Eigen::Vector3d out = Eigen::AngleAxisd(-turn, up) * out_straight;
   const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
   const Eigen::Vector3d w = up.cross(u);  // horizontal, across the pull line
   // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
@@ -699,8 +741,8 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
           for (const double rs : {1.0, -1.0}) {
             if (roll == 0.0 && rs < 0) continue;
             ++result.candidates;
-            const Eigen::Vector3d u_yaw = Eigen::AngleAxisd(ys * yaw, up) * u;
-            const Eigen::Vector3d r = -std::cos(el) * u_yaw - std::sin(el) * up;  // palm -> effector
+            const Eigen::Vector3d out_yaw = Eigen::AngleAxisd(ys * yaw, up) * out;
+            const Eigen::Vector3d r = std::cos(el) * out_yaw - std::sin(el) * up;  // palm -> effector
             Eigen::Matrix3d F_R = frame(r, u);
             F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
             Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
@@ -813,13 +855,35 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     result.reason = Cat("no sampled tool orientation puts the effector behind the object (", result.candidates,
                         " sampled; object at ", p_RO.transpose(), " m in R; smallest palm IK error ", best_error,
                         " m)");
-    return result;
+    return plan;
   }
   if (!planned) {
     result.status = PullStatus::kIkFailed;
     result.reason = Cat(result.candidates_feasible, " start poses reachable but no complete path; last: ", last_failure);
-    return result;
+    return plan;
   }
+  result.status = PullStatus::kPulled;
+  plan.q_above = std::move(q_above);
+  plan.descend = std::move(descend);
+  plan.drag = std::move(drag);
+  plan.lift = std::move(lift);
+  return plan;
+}
+
+PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
+                      const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
+                      const PullOptions& options) {
+  options.Validate();
+  RequireHandJoints(robot, desc, "PullObject");
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
+  PullPlan plan = PlanPull(desc, q_now, X_PT, effector, p_RO, object_radius, options);
+  PullResult& result = plan.result;
+  if (!plan.complete()) return result;
+  const Eigen::VectorXd& q_above = plan.q_above;
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
 
   const double t0 = robot.Time();
   {
@@ -865,9 +929,9 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     result.reason = Cat("above the start not reached: ", worst, " off by ", arm_error, " rad");
     return result;
   }
-  FollowWaypoints(robot, chain, descend, options.waypoint);
-  FollowWaypoints(robot, chain, drag, options.waypoint);
-  FollowWaypoints(robot, chain, lift, options.waypoint);
+  FollowWaypoints(robot, chain, plan.descend, options.waypoint);
+  FollowWaypoints(robot, chain, plan.drag, options.waypoint);
+  FollowWaypoints(robot, chain, plan.lift, options.waypoint);
   result.motion_s = robot.Time() - t0;
   const double gap = FingerGap(robot, desc);
   if (gap < options.empty_hand_tol) {

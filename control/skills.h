@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -143,6 +145,30 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
                         const GraspOptions& options = {});
 
 
+/// What a tool action does to an object lying on the table (the thesis's pull, and the drag and
+/// push actions of the tool-affordances experiments).
+enum class ToolAction {
+  kPull,       // toward the robot's vertical axis (z_R)
+  kDragLeft,   // across, to the robot's left (-y_R side)
+  kDragRight,  // across, to the robot's right (+y_R side)
+  kPush,       // away from the robot's vertical axis
+};
+
+/// Name of an action: "pull", "drag-left", "drag-right", "push".
+const char* ToString(ToolAction action);
+
+/// The action named `name` (as ToString writes it, case-sensitive), or nullopt for any other name.
+std::optional<ToolAction> ParseToolAction(std::string_view name);
+
+/// Unit horizontal direction in R (z component 0) in which `action` moves an object at p_RO (in
+/// R) [1]: pull = from the object toward the robot's vertical axis z_R, push = the opposite,
+/// drag-left/right = perpendicular to those, to the robot's left/right. In the iCub root frame
+/// (x backward, z up, hence y to the robot's right) drag-right is z_R x pull (toward +y_R for an
+/// object in front of the robot) and drag-left its opposite (toward -y_R).
+/// Throws std::invalid_argument for a non-finite p_RO or one on the z_R axis (closer than 1 mm
+/// horizontally), where no direction is defined.
+Eigen::Vector3d ActionDirection(ToolAction action, const Eigen::Vector3d& p_RO);
+
 /// The working part of a tool held in the hand, in the tool frame T (toollib's effector segment).
 struct ToolEffector {
   /// Effector centre p_TE in T [m]; finite.
@@ -165,6 +191,9 @@ struct ToolEffector {
 /// Options of PullObject. Defaults pull the scene's ball (scenes/default.json) with library tools
 /// grasped from the rack (measured by `toolbench bench --protocol pull-gt`).
 struct PullOptions {
+  /// What the skill does to the object: the drag direction is ActionDirection(action, p_RO) (turned
+  /// by up to max_pull_turn_rad), and the effector starts on the object's far side from it.
+  ToolAction action = ToolAction::kPull;
   double clearance_m = 0.01;        // gap between the object's far surface and the effector [m], >= 0
   /// With effector points (ToolEffector::points_T): lowest tool point this far above the object's
   /// support plane (object centre height minus its radius) at the start [m], >= 0; the effector is
@@ -187,7 +216,7 @@ struct PullOptions {
   double left_arm_clearance_m = 0.06;
   std::vector<std::string> left_arm_links{"l_hand", "l_wrist_1", "l_forearm"};
   double height_offset_m = 0.0;     // effector centre height above the object centre [m]
-  double pull_length_m = 0.25;      // planned drag toward the robot [m], > 0
+  double pull_length_m = 0.25;      // planned drag along the action's direction [m], > 0
   /// The drag may be cut short where IK stops converging, but not below this fraction of
   /// pull_length_m, in (0, 1].
   double min_pull_fraction = 0.3;
@@ -209,9 +238,9 @@ struct PullOptions {
   /// place it was taken from (the rack) before it swings [m], >= 0; cut short where IK ends.
   double clear_back_m = 0.15;
   double clear_up_m = 0.05;
-  /// The drag direction may turn about z_R away from "straight toward the robot's axis" by up to
-  /// this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first that
-  /// plans wins, straight first): the start then lies nearer the right shoulder.
+  /// The drag direction may turn about z_R away from the action's direction (ActionDirection) by
+  /// up to this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first
+  /// that plans wins, straight first; for a pull, the start then lies nearer a shoulder).
   double max_pull_turn_rad = 30.0 * M_PI / 180.0;
   double pull_turn_step_rad = 15.0 * M_PI / 180.0;  // > 0
   int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
@@ -244,9 +273,10 @@ const char* ToString(PullStatus status);
 struct PullResult {
   PullStatus status = PullStatus::kUnreachable;
   std::string reason;                                      // empty when pulled
+  ToolAction action = ToolAction::kPull;                   // the action performed (PullOptions::action)
   Eigen::Isometry3d X_RT_start = Eigen::Isometry3d::Identity();  // planned tool pose at the drag start, in R
-  Eigen::Vector3d pull_dir_R = Eigen::Vector3d::Zero();    // unit horizontal drag direction in R
-  double pull_turn_rad = 0.0;    // its turn from "straight toward the robot's axis" [rad]
+  Eigen::Vector3d pull_dir_R = Eigen::Vector3d::Zero();    // unit horizontal drag direction used, in R
+  double pull_turn_rad = 0.0;    // its turn about z_R from ActionDirection(action, p_RO) [rad]
   double planned_drag_m = 0.0;   // length of the planned drag [m]
   double elevation_rad = 0.0;    // chosen orientation sample (see PullOptions)
   double yaw_rad = 0.0;
@@ -259,10 +289,30 @@ struct PullResult {
   double motion_s = 0.0;         // robot time of the whole motion [s]
 };
 
-/// Pulls an object (a ball) toward the robot with a tool held in the right hand:
-///  1. the pull direction u is horizontal, from the object toward the robot's z axis (or turned
-///     by up to max_pull_turn_rad, straight first); the start puts the effector centre beyond the
-///     object on the pull line. With effector points (ToolEffector::points_T, tool_points_T) the
+/// A planned tool action (PlanPull): the result so far and the right-arm chain postures (model q,
+/// URDF order) to execute. result.status is kPulled when the plan is complete (nothing moved yet),
+/// else kUnreachable or kIkFailed with the reason; the postures are then empty.
+struct PullPlan {
+  PullResult result;
+  Eigen::VectorXd q_above;                // above the start (the joint-space transfer ends here)
+  std::vector<Eigen::VectorXd> descend;   // straight descent to the start (last = the start)
+  std::vector<Eigen::VectorXd> drag;      // the drag along result.pull_dir_R
+  std::vector<Eigen::VectorXd> lift;      // the lift after the drag (may be shorter than asked)
+  bool complete() const { return result.status == PullStatus::kPulled; }
+};
+
+/// Plans PullObject's motion from the posture q_model (model q, URDF order; e.g. the encoders)
+/// without moving anything: steps 1-2 of PullObject. Same arguments and exceptions as PullObject
+/// (less the robot).
+PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Isometry3d& X_PT,
+                  const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
+                  const PullOptions& options = {});
+
+/// Pulls an object (a ball) toward the robot with a tool held in the right hand, or drags it
+/// sideways or pushes it away (PullOptions::action):
+///  1. the drag direction u is ActionDirection(options.action, p_RO), horizontal (or turned by up
+///     to max_pull_turn_rad, straight first); the start puts the effector centre beyond the
+///     object on the line through it along -u (the object's far side from u). With effector points (ToolEffector::points_T, tool_points_T) the
 ///     start is found per sampled orientation: the tool at the object's centre height (+
 ///     height_offset_m), raised until its lowest point is support_clearance_m above the object's
 ///     support, moved out along -u from the object until no tool point would come down on the
@@ -271,7 +321,8 @@ struct PullResult {
 ///     min_palm_height_m above the support. Without points: (object_radius + clearance_m +
 ///     effector.half_thickness_m) from its centre along -u, at its centre height (+ height_offset_m);
 ///  2. samples tool orientations: the palm -> effector line points away from the robot and down
-///     (elevation, yaw about z_R), the working direction as close to u as that allows (roll),
+///     (elevation, yaw about z_R from the horizontal direction from the robot's axis to the
+///     object, turned as u is), the working direction as close to u as that allows (roll),
 ///     screens each with a cheap IK of the palm pose X_RP = X_RT * X_PT^-1, then plans, lowest
 ///     rest cost first: above the start (approach_height_m up), straight descent, straight drag
 ///     of pull_length_m along u (cut short where IK ends, not below min_pull_fraction), lift;

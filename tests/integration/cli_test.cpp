@@ -231,6 +231,27 @@ TEST(CliTest, EpisodeBadInputIsNamed) {
   const CliRun action = Toolbench("episode --action throw --out " + TempDir("episode_bad2").string());
   EXPECT_NE(action.code, 0);
   EXPECT_THAT(action.output, HasSubstr("throw"));
+  // A known action is accepted; an affordance model that exists but is malformed is named.
+  const auto dir = TempDir("episode_bad3");
+  std::ofstream(dir / "model.json") << "{\"format\": \"other\"}";
+  const CliRun model = Toolbench("episode --action push --affordance-model " + (dir / "model.json").string() +
+                                 " --out " + dir.string());
+  EXPECT_NE(model.code, 0);
+  EXPECT_THAT(model.output, HasSubstr("model.json"));
+  EXPECT_THAT(model.output, HasSubstr("format is not"));
+}
+
+TEST(CliTest, ExploreBadInputIsNamed) {
+  const auto dir = TempDir("explore_bad");
+  const CliRun action = Toolbench("explore --actions throw --out " + dir.string());
+  EXPECT_NE(action.code, 0);
+  EXPECT_THAT(action.output, HasSubstr("throw"));
+  const CliRun roll = Toolbench("explore --orientations 400 --out " + dir.string());
+  EXPECT_NE(roll.code, 0);
+  EXPECT_THAT(roll.output, HasSubstr("400"));
+  const CliRun tools = Toolbench("explore --tools no_such_tool --out " + dir.string());
+  EXPECT_NE(tools.code, 0);
+  EXPECT_THAT(tools.output, HasSubstr("no_such_tool"));
 }
 
 }  // namespace

@@ -1,0 +1,125 @@
+// Tool actions (pull, drag-left, drag-right, push): names, directions, and the planned start and
+// drag of each action with a stick-like tool (PlanPull, no simulator).
+#include <algorithm>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "control/kinematics.h"
+#include "control/skills.h"
+#include "robot/robot_description.h"
+
+namespace toolbench::control {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+constexpr ToolAction kActions[] = {ToolAction::kPull, ToolAction::kDragLeft, ToolAction::kDragRight,
+                                   ToolAction::kPush};
+
+TEST(ToolActionTest, NamesRoundTrip) {
+  EXPECT_STREQ(ToString(ToolAction::kPull), "pull");
+  EXPECT_STREQ(ToString(ToolAction::kDragLeft), "drag-left");
+  EXPECT_STREQ(ToString(ToolAction::kDragRight), "drag-right");
+  EXPECT_STREQ(ToString(ToolAction::kPush), "push");
+  for (const ToolAction a : kActions) EXPECT_EQ(ParseToolAction(ToString(a)), a);
+  EXPECT_EQ(ParseToolAction("Pull"), std::nullopt);
+  EXPECT_EQ(ParseToolAction(""), std::nullopt);
+  EXPECT_EQ(ParseToolAction("drag"), std::nullopt);
+}
+
+TEST(ToolActionTest, DirectionsInTheRootFrame) {
+  // Object straight in front of the robot (x_R points backward, y_R to the robot's right).
+  const Eigen::Vector3d front(-0.5, 0.0, -0.07);
+  EXPECT_TRUE(ActionDirection(ToolAction::kPull, front).isApprox(Eigen::Vector3d::UnitX()));
+  EXPECT_TRUE(ActionDirection(ToolAction::kPush, front).isApprox(-Eigen::Vector3d::UnitX()));
+  EXPECT_TRUE(ActionDirection(ToolAction::kDragRight, front).isApprox(Eigen::Vector3d::UnitY()));
+  EXPECT_TRUE(ActionDirection(ToolAction::kDragLeft, front).isApprox(-Eigen::Vector3d::UnitY()));
+  // Off to the right: unit, horizontal, pull toward the axis, drags perpendicular to it.
+  const Eigen::Vector3d right(-0.4, 0.3, 0.1);
+  const Eigen::Vector3d pull = ActionDirection(ToolAction::kPull, right);
+  EXPECT_TRUE(pull.isApprox(Eigen::Vector3d(0.8, -0.6, 0.0)));
+  for (const ToolAction a : kActions) {
+    const Eigen::Vector3d d = ActionDirection(a, right);
+    EXPECT_NEAR(d.norm(), 1.0, 1e-12) << ToString(a);
+    EXPECT_EQ(d.z(), 0.0) << ToString(a);
+  }
+  EXPECT_NEAR(ActionDirection(ToolAction::kDragLeft, right).dot(pull), 0.0, 1e-12);
+  EXPECT_GT(ActionDirection(ToolAction::kDragRight, right).y(), 0.0);
+  EXPECT_THAT([] { ActionDirection(ToolAction::kPull, Eigen::Vector3d(0.0, 0.0, -0.1)); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("vertical axis")));
+  EXPECT_THAT([] { ActionDirection(ToolAction::kPush, Eigen::Vector3d(std::nan(""), 0.0, 0.0)); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("p_RO")));
+}
+
+class ToolActionPlanTest : public ::testing::TestWithParam<ToolAction> {
+ protected:
+  static void SetUpTestSuite() {
+    robot_ = new robot::RobotDescription(robot::LoadRobotDescription(robot::DefaultRobotSidecar()));
+  }
+  static void TearDownTestSuite() { delete robot_; }
+  static robot::RobotDescription* robot_;
+};
+robot::RobotDescription* ToolActionPlanTest::robot_ = nullptr;
+
+// A 30 cm stick held at the hand's grasp cylinder, its axis z_T along the cylinder's axis; the
+// effector (the far end) meets the object with its +x_T side. Few orientation samples keep the
+// plan under a second; no effector points, so the start lies on the drag line.
+TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
+  const ToolAction action = GetParam();
+  const robot::RobotDescription& desc = *robot_;
+  Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
+  X_PT.linear() =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
+  X_PT.translation() = desc.grasp.center;
+  ToolEffector effector;
+  effector.center_T = Eigen::Vector3d(0.0, 0.0, 0.30);
+  effector.direction_T = Eigen::Vector3d::UnitX();
+  effector.half_thickness_m = 0.01;
+  PullOptions options;
+  options.action = action;
+  options.min_elevation_rad = 20.0 * M_PI / 180.0;
+  options.max_elevation_rad = 40.0 * M_PI / 180.0;
+  options.elevation_step_rad = 10.0 * M_PI / 180.0;
+  options.max_yaw_rad = 40.0 * M_PI / 180.0;
+  options.max_roll_rad = 60.0 * M_PI / 180.0;
+  options.max_pull_turn_rad = 0.0;
+  options.pull_length_m = 0.10;
+  const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
+  constexpr double kRadius = 0.035;
+  const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
+  ASSERT_TRUE(plan.complete()) << ToString(action) << ": " << plan.result.reason;
+  EXPECT_EQ(plan.result.action, action);
+  const Eigen::Vector3d dir = ActionDirection(action, p_RO);
+  EXPECT_TRUE(plan.result.pull_dir_R.isApprox(dir, 1e-9)) << plan.result.pull_dir_R.transpose();
+
+  // The planned start: the effector on the object's far side from the drag direction, on the line.
+  const Eigen::Vector3d p_RE = plan.result.X_RT_start * effector.center_T;
+  const Eigen::Vector3d d = p_RE - p_RO;
+  EXPECT_LT(d.dot(dir), -kRadius) << "effector at " << p_RE.transpose();
+  EXPECT_LT(std::abs(d.dot(Eigen::Vector3d::UnitZ().cross(dir))), 0.005) << "effector at " << p_RE.transpose();
+  // Where the arm really ends at the start (IK within start_tolerance_m), and the drag.
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  ASSERT_FALSE(plan.descend.empty());
+  ASSERT_GE(plan.drag.size(), 2u);
+  const Eigen::Vector3d p_start = (chain.TipPose(plan.descend.back()) * X_PT) * effector.center_T;
+  EXPECT_LT((p_start - p_RE).norm(), options.start_tolerance_m + 1e-3);
+  EXPECT_LT((p_start - p_RO).dot(dir), -kRadius);
+  const Eigen::Vector3d p_end = (chain.TipPose(plan.drag.back()) * X_PT) * effector.center_T;
+  const Eigen::Vector3d moved = p_end - p_start;
+  EXPECT_GT(moved.dot(dir), options.min_pull_fraction * options.pull_length_m - 0.01) << moved.transpose();
+  EXPECT_GT(moved.normalized().dot(dir), 0.98) << moved.transpose();
+  EXPECT_NEAR(plan.result.planned_drag_m, options.pull_length_m * plan.drag.size() / options.drag_waypoints, 1e-9);
+}
+
+INSTANTIATE_TEST_SUITE_P(Actions, ToolActionPlanTest, ::testing::ValuesIn(kActions),
+                         [](const ::testing::TestParamInfo<ToolAction>& info) {
+                           std::string name = ToString(info.param);
+                           name.erase(std::remove(name.begin(), name.end(), '-'), name.end());
+                           return name;
+                         });
+
+}  // namespace
+}  // namespace toolbench::control
