@@ -173,6 +173,7 @@ int RunPullBench(const BenchRequest& request) {
   };
   std::map<std::string, Tally> per_family;
   std::map<std::string, int> reasons;
+  std::vector<double> plan_ms;  // PullResult::plan_ms of every case that reached the pull
   Tally total;
   int run = 0;
   const PullCaseOptions options;
@@ -195,6 +196,7 @@ int RunPullBench(const BenchRequest& request) {
       t->displacement += r.displacement_m;
     }
     if (!r.reason.empty()) ++reasons[r.reason.substr(0, r.reason.find(':'))];
+    if (r.grasped) plan_ms.push_back(r.pull.plan_ms);
     auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
     nlohmann::json line = {{"index", index},
                            {"tool", tool},
@@ -217,6 +219,9 @@ int RunPullBench(const BenchRequest& request) {
                            {"pull_candidates_blocked", r.pull.candidates_blocked},
                            {"pull_start_distance_m", r.pull.start_distance_m},
                            {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
+                           {"pull_plan_attempts", r.pull.plan_attempts},
+                           {"pull_plan_ms", r.pull.plan_ms},
+                           {"pull_motion_s", r.pull.motion_s},
                            {"put_down", r.put_down},
                            {"ball_grasp_tried", r.ball_grasp_tried},
                            {"ball_grasped", r.ball_grasped},
@@ -224,8 +229,9 @@ int RunPullBench(const BenchRequest& request) {
                            {"sim_time_s", r.sim_time},
                            {"wall_ms", r.wall_ms}};
     cases << line.dump() << "\n" << std::flush;
-    spdlog::info("pull-gt {}: ball moved {:.1f} cm toward the robot, {} ({}) [{:.0f} ms]", tool, r.displacement_m * 100,
-                 r.ball_in_reach ? "in reach" : "out of reach", r.reason, r.wall_ms);
+    spdlog::info("pull-gt {}: ball moved {:.1f} cm toward the robot, {} ({}) [plan {:.0f} ms, {:.0f} ms]", tool,
+                 r.displacement_m * 100, r.ball_in_reach ? "in reach" : "out of reach", r.reason, r.pull.plan_ms,
+                 r.wall_ms);
   }
   auto ratio = [](int k, int n) { return n > 0 ? static_cast<double>(k) / n : std::nan(""); };
   auto tally_json = [&](const Tally& t) {
@@ -242,6 +248,12 @@ int RunPullBench(const BenchRequest& request) {
   summary["shard_index"] = request.shard_index;
   summary["shard_count"] = request.shard_count;
   summary["cell"] = options.cell;
+  if (!plan_ms.empty()) {
+    std::sort(plan_ms.begin(), plan_ms.end());
+    const size_t n = plan_ms.size();
+    summary["pull_plan_ms_median"] = n % 2 == 1 ? plan_ms[n / 2] : 0.5 * (plan_ms[n / 2 - 1] + plan_ms[n / 2]);
+    summary["pull_plan_ms_max"] = plan_ms.back();
+  }
   summary["success_criterion"] =
       "pull success: after the pull the ball is within reach, i.e. a palm pose grasping it from above (or tilted "
       "toward the robot up to 57 deg) has a converged IK from the home posture; displacement = ball motion along the "
