@@ -219,7 +219,6 @@ int RunPullBench(const BenchRequest& request) {
                            {"pull_candidates_blocked", r.pull.candidates_blocked},
                            {"pull_start_distance_m", r.pull.start_distance_m},
                            {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
-                           {"pull_plan_attempts", r.pull.plan_attempts},
                            {"pull_plan_ms", r.pull.plan_ms},
                            {"pull_motion_s", r.pull.motion_s},
                            {"put_down", r.put_down},

@@ -521,14 +521,6 @@ void PullOptions::Validate() const {
   if (descend_waypoints < 1) fail("descend_waypoints", descend_waypoints, ">= 1");
   if (!(clear_back_m >= 0)) fail("clear_back_m", clear_back_m, ">= 0");
   if (!(clear_up_m >= 0)) fail("clear_up_m", clear_up_m, ">= 0");
-  if (!(transfer_rise_m >= 0)) fail("transfer_rise_m", transfer_rise_m, ">= 0");
-  if (transfer_waypoints < 1) fail("transfer_waypoints", transfer_waypoints, ">= 1");
-  if (!(transfer_clearance_m >= 0)) fail("transfer_clearance_m", transfer_clearance_m, ">= 0");
-  if (quick_screening_restarts < 0) fail("quick_screening_restarts", quick_screening_restarts, ">= 0");
-  if (quick_screening_ipopt_iterations < 1) {
-    fail("quick_screening_ipopt_iterations", quick_screening_ipopt_iterations, "> 0");
-  }
-  if (max_plan_attempts < 1) fail("max_plan_attempts", max_plan_attempts, "> 0");
   if (!(max_pull_turn_rad >= 0 && max_pull_turn_rad <= M_PI / 2)) fail("max_pull_turn_rad", max_pull_turn_rad, "in [0, pi/2]");
   if (!(pull_turn_step_rad > 0)) fail("pull_turn_step_rad", pull_turn_step_rad, "> 0");
   if (drag_waypoints < 2) fail("drag_waypoints", drag_waypoints, ">= 2");
@@ -658,34 +650,29 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   auto path_clear = [&](const std::vector<Eigen::VectorXd>& path) {
     return std::all_of(path.begin(), path.end(), left_arm_clear);
   };
-  // The held tool's points (a subsample of tool_points_T, at most ~150) for the clearance checks
-  // of the transfer: lowest tool point in R for a palm pose.
-  Eigen::Matrix3Xd tool_check_T;
-  if (geometric) {
-    const Eigen::Index n = effector.tool_points_T.cols();
-    const Eigen::Index stride = std::max<Eigen::Index>(1, n / 150);
-    tool_check_T.resize(3, (n + stride - 1) / stride);
-    for (Eigen::Index i = 0, k = 0; i < n; i += stride, ++k) tool_check_T.col(k) = effector.tool_points_T.col(i);
-  } else {
-    tool_check_T = effector.center_T;
-  }
-  auto lowest_tool_z = [&](const Eigen::Isometry3d& X_RP) {
-    return ((X_RP * X_PT) * tool_check_T).row(2).minCoeff();
-  };
-
   std::vector<double> turns{0.0};
   for (double t = options.pull_turn_step_rad; t <= options.max_pull_turn_rad + 1e-9; t += options.pull_turn_step_rad) {
     turns.push_back(-t);  // -: toward the right shoulder (+y_R) for an object in front
     turns.push_back(t);
   }
+  Eigen::VectorXd q_above;
+  std::vector<Eigen::VectorXd> descend, drag, lift;
+  std::string last_failure;
+  double best_error = std::numeric_limits<double>::infinity();
+  bool any_feasible = false;
+  bool planned = false;
+  for (const double turn : turns) {
+  const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
+  const Eigen::Vector3d out = Eigen::AngleAxisd(-turn, up) * out_straight;
   const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
-  // With the tool's points (in R, relative to the effector centre) and the effector centre at c,
-  // dragged along u (w = across): -1 when a point would come down on the object (inflated by
-  // clearance_m) during the vertical descent, 0 when the tool is clear but no effector point lies
-  // beyond the object within its cross-section (near the drag line, between the support and the
-  // centre height), 1 when fine.
-  auto start_clear = [&](const Eigen::Matrix3Xd& tool, const Eigen::Matrix3Xd& eff, const Eigen::Vector3d& c,
-                         const Eigen::Vector3d& u, const Eigen::Vector3d& w) {
+  const Eigen::Vector3d w = up.cross(u);  // horizontal, across the pull line
+  // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
+  // behind the object without touching it, or its effector would not meet the object.
+  // With the tool's points (in R, relative to the effector centre) and the effector centre at c:
+  // -1 when a point would come down on the object (inflated by clearance_m) during the vertical
+  // descent, 0 when the tool is clear but no effector point lies beyond the object within its
+  // cross-section (near the pull line, between the support and the centre height), 1 when fine.
+  auto start_clear = [&](const Eigen::Matrix3Xd& tool, const Eigen::Matrix3Xd& eff, const Eigen::Vector3d& c) {
     const double r_in = object_radius + options.clearance_m;
     for (Eigen::Index i = 0; i < tool.cols(); ++i) {
       const Eigen::Vector3d d = c + tool.col(i) - p_RO;
@@ -698,10 +685,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     }
     return 0;
   };
-  // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
-  // behind the object without touching it, or its effector would not meet the object.
-  auto place_start = [&](const Eigen::Matrix3d& R_RT, const Eigen::Vector3d& u, const Eigen::Vector3d& w,
-                         Eigen::Vector3d* p_RE) -> bool {
+  auto place_start = [&](const Eigen::Matrix3d& R_RT, Eigen::Vector3d* p_RE) -> bool {
     if (!geometric) {
       *p_RE = p_RO - behind * u + options.height_offset_m * up;
       return true;
@@ -713,7 +697,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
                               support_z + options.support_clearance_m - tool.row(2).minCoeff());
     for (double t = object_radius; t <= options.max_start_distance_m + 1e-9; t += options.start_step_m) {
       const Eigen::Vector3d c(p_RO.x() - t * u.x(), p_RO.y() - t * u.y(), z);
-      const int clear = start_clear(tool, eff, c, u, w);
+      const int clear = start_clear(tool, eff, c);
       if (clear < 0) continue;
       if (clear == 0) return false;
       *p_RE = c;
@@ -723,7 +707,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   };
 
   // Frames built in T from the palm -> effector line a_T and the working direction d_T, and in R
-  // from the sampled line r and the drag direction u; the tool rotation maps one onto the other.
+  // from the sampled line r and the pull direction u; the tool rotation maps one onto the other.
   const Eigen::Vector3d p_TP = X_TP.translation();
   Eigen::Vector3d a_T = effector.center_T - p_TP;
   const Eigen::Vector3d d_T = effector.direction_T.normalized();
@@ -743,206 +727,69 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   };
   const Eigen::Matrix3d F_T = frame(a_T, d_T);
 
-  // 1. All sampled orientations for all turns, placed geometrically (cheap, no IK).
-  const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
   struct Candidate {
     Eigen::Isometry3d X_RT;
-    Eigen::Isometry3d X_RP;
-    int turn_index = 0;
-    Eigen::Vector3d u;
-    double elevation = 0, yaw = 0, roll = 0;
+    double elevation, yaw, roll;
+    IkResult ik;
   };
-  std::vector<Candidate> candidates;
-  for (size_t ti = 0; ti < turns.size(); ++ti) {
-    const Eigen::Vector3d u = Eigen::AngleAxisd(-turns[ti], up) * u_straight;
-    const Eigen::Vector3d out = Eigen::AngleAxisd(-turns[ti], up) * out_straight;
-    const Eigen::Vector3d w = up.cross(u);  // horizontal, across the drag line
-    for (double el = options.min_elevation_rad; el <= options.max_elevation_rad + 1e-9; el += options.elevation_step_rad) {
-      for (double yaw = 0.0; yaw <= options.max_yaw_rad + 1e-9; yaw += options.yaw_step_rad) {
-        for (const double ys : {1.0, -1.0}) {
-          if (yaw == 0.0 && ys < 0) continue;
-          for (double roll = 0.0; roll <= options.max_roll_rad + 1e-9; roll += options.roll_step_rad) {
-            for (const double rs : {1.0, -1.0}) {
-              if (roll == 0.0 && rs < 0) continue;
-              ++result.candidates;
-              const Eigen::Vector3d out_yaw = Eigen::AngleAxisd(ys * yaw, up) * out;
-              const Eigen::Vector3d r = std::cos(el) * out_yaw - std::sin(el) * up;  // palm -> effector
-              Eigen::Matrix3d F_R = frame(r, u);
-              F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
-              Candidate c;
-              c.X_RT = Eigen::Isometry3d::Identity();
-              c.X_RT.linear() = F_R * F_T.transpose();
-              Eigen::Vector3d p_RE_start;
-              if (!place_start(c.X_RT.linear(), u, w, &p_RE_start)) {
-                ++result.candidates_blocked;
-                continue;
-              }
-              c.X_RT.translation() = p_RE_start - c.X_RT.linear() * effector.center_T;
-              c.X_RP = c.X_RT * X_TP;
-              if (c.X_RP.translation().z() < support_z + options.min_palm_height_m) {
-                ++result.candidates_blocked;
-                continue;
-              }
-              c.turn_index = static_cast<int>(ti);
-              c.u = u;
-              c.elevation = el;
-              c.yaw = ys * yaw;
-              c.roll = rs * roll;
-              candidates.push_back(c);
+  std::vector<Candidate> feasible;
+  for (double el = options.min_elevation_rad; el <= options.max_elevation_rad + 1e-9; el += options.elevation_step_rad) {
+    for (double yaw = 0.0; yaw <= options.max_yaw_rad + 1e-9; yaw += options.yaw_step_rad) {
+      for (const double ys : {1.0, -1.0}) {
+        if (yaw == 0.0 && ys < 0) continue;
+        for (double roll = 0.0; roll <= options.max_roll_rad + 1e-9; roll += options.roll_step_rad) {
+          for (const double rs : {1.0, -1.0}) {
+            if (roll == 0.0 && rs < 0) continue;
+            ++result.candidates;
+            const Eigen::Vector3d out_yaw = Eigen::AngleAxisd(ys * yaw, up) * out;
+            const Eigen::Vector3d r = std::cos(el) * out_yaw - std::sin(el) * up;  // palm -> effector
+            Eigen::Matrix3d F_R = frame(r, u);
+            F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
+            Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
+            X_RT.linear() = F_R * F_T.transpose();
+            Eigen::Vector3d p_RE_start;
+            if (!place_start(X_RT.linear(), &p_RE_start)) {
+              ++result.candidates_blocked;
+              continue;
             }
+            X_RT.translation() = p_RE_start - X_RT.linear() * effector.center_T;
+            const Eigen::Isometry3d X_RP = X_RT * X_TP;
+            if (X_RP.translation().z() < support_z + options.min_palm_height_m) {
+              ++result.candidates_blocked;
+              continue;
+            }
+            IkResult ik = loose_screen.Solve(X_RP, q_now);
+            best_error = std::min(best_error, ik.position_error_m);
+            if (Converged(ik) && !left_arm_clear(ik.q)) {
+              ++result.candidates_blocked;
+              continue;
+            }
+            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik)});
           }
         }
       }
     }
   }
-
-  // 2. The transfer from the current posture to above the start: straight back toward the robot
-  // and up (the tool leaves the rack), up to transfer height, across to above the start
-  // (orientation slerped), down to above the start; every waypoint keeps the tool's lowest point
-  // transfer_clearance_m above the support. Fills `clear` (cut short where IK ends) in any case;
-  // returns false, `transfer` untouched, when IK or the clearance fails on the way.
-  auto plan_transfer = [&](const Eigen::Isometry3d& X_RP_above, const Eigen::VectorXd& q_end,
-                           std::vector<Eigen::VectorXd>* clear, std::vector<Eigen::VectorXd>* transfer) {
-    Eigen::Vector3d back(-X_RP_now.translation().x(), -X_RP_now.translation().y(), 0.0);
-    back = back.norm() > 1e-6 ? back.normalized() : Eigen::Vector3d::Zero();
-    Eigen::Isometry3d X_clear = X_RP_now;
-    X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
-    *clear = LineWaypoints(solver, X_RP_now, X_clear, 4, q_now);
-    Eigen::VectorXd q = clear->empty() ? q_now : clear->back();
-    const Eigen::Isometry3d X_from = chain.TipPose(q);
-    const double z_high = std::max(X_from.translation().z(), X_RP_above.translation().z() + options.transfer_rise_m);
-    // Via points: above where the tool is (z_high), above the start (z_high), above the start.
-    std::vector<std::pair<Eigen::Isometry3d, int>> legs;
-    Eigen::Isometry3d X_up = X_from;
-    X_up.translation().z() = z_high;
-    Eigen::Isometry3d X_over = X_RP_above;
-    X_over.translation().z() = z_high;
-    legs.push_back({X_up, 2});
-    legs.push_back({X_over, options.transfer_waypoints});
-    legs.push_back({X_RP_above, 2});
-    std::vector<Eigen::VectorXd> path;
-    Eigen::Isometry3d X_prev = X_from;
-    for (const auto& [X_to, n] : legs) {
-      const Eigen::Quaterniond r_from(X_prev.linear()), r_to(X_to.linear());
-      for (int i = 1; i <= n; ++i) {
-        const double t = static_cast<double>(i) / n;
-        Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-        X.linear() = r_from.slerp(t, r_to).toRotationMatrix();
-        X.translation() = X_prev.translation() + t * (X_to.translation() - X_prev.translation());
-        const IkResult ik = solver.Solve(X, q);
-        if (!Converged(ik) || lowest_tool_z(X) < support_z + options.transfer_clearance_m) return false;
-        q = ik.q;
-        path.push_back(q);
-      }
-      X_prev = X_to;
-    }
-    // The last waypoint is the start-above pose itself: end exactly on the planned posture.
-    path.back() = q_end;
-    *transfer = std::move(path);
-    return true;
-  };
-
+  result.candidates_feasible += static_cast<int>(feasible.size());
+  any_feasible = any_feasible || !feasible.empty();
+  std::stable_sort(feasible.begin(), feasible.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
   const int min_drag = std::max(2, static_cast<int>(std::ceil(options.min_pull_fraction * options.drag_waypoints)));
-  std::string last_failure;
-  double best_error = std::numeric_limits<double>::infinity();
-  int attempts = 0;
-  bool planned = false;
-  // Screening, per drag turn (straight first): a quick pass (few restarts and Ipopt iterations)
-  // over all its orientations, then the full screen over those the quick pass missed. After each
-  // pass the orientations that screened are planned, those whose screen reached the pose exactly
-  // first, then by IK rest cost (postures away from the joint limits plan through more often than
-  // those at the edge of the workspace); the first complete plan wins. Most reachable
-  // orientations pass the quick screen, so the expensive screen of unreachable ones (most of
-  // them) runs only when no quick one plans.
-  struct Screened {
-    const Candidate* c;
-    IkResult ik;
-    bool exact;
-  };
-  struct Complete {
-    const Candidate* c;
-    Eigen::Isometry3d X_RP_start;
-    Eigen::VectorXd q_above;
-    std::vector<Eigen::VectorXd> clear, transfer, descend, drag;
-  };
-  // Takes a complete plan: adds the (optional) lift after the drag and fills the result.
-  auto commit = [&](Complete k) {
-    const Candidate& c = *k.c;
-    const Eigen::Vector3d& u = c.u;
-    Eigen::Isometry3d X_RP_last = k.X_RP_start;
-    X_RP_last.translation() += (options.pull_length_m * k.drag.size() / options.drag_waypoints) * u;
-    Eigen::Isometry3d X_RP_up = X_RP_last;
-    X_RP_up.translation() += options.approach_height_m * up;
-    plan.lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, k.drag.back());  // optional
-    plan.q_above = std::move(k.q_above);
-    plan.clear = std::move(k.clear);
-    plan.transfer = std::move(k.transfer);
-    plan.descend = std::move(k.descend);
-    plan.drag = std::move(k.drag);
-    result.planned_drag_m = options.pull_length_m * plan.drag.size() / options.drag_waypoints;
-    result.X_RT_start = c.X_RT;
-    result.elevation_rad = c.elevation;
-    result.yaw_rad = c.yaw;
-    result.roll_rad = c.roll;
-    result.pull_dir_R = u;
-    result.pull_turn_rad = turns[c.turn_index];
-    const Eigen::Vector3d p_RE = c.X_RT * effector.center_T;
-    result.start_distance_m = Eigen::Vector2d(p_RE.x() - p_RO.x(), p_RE.y() - p_RO.y()).norm();
-    planned = true;
-  };
-  IkOptions quick_options = loose_screen.options();
-  quick_options.presolve_restarts = std::min(quick_options.presolve_restarts, options.quick_screening_restarts);
-  quick_options.max_iterations = std::min(quick_options.max_iterations, options.quick_screening_ipopt_iterations);
-  CartesianSolver quick_screen(chain, desc.HomeQ(), quick_options);
-  std::vector<char> quick_missed(candidates.size(), 0);
-  size_t group_begin = 0;
-  for (int pass = 0; group_begin < candidates.size() && !planned && attempts < options.max_plan_attempts; ++pass) {
-    size_t group_end = group_begin;
-    while (group_end < candidates.size() && candidates[group_end].turn_index == candidates[group_begin].turn_index) {
-      ++group_end;
-    }
-    const bool quick = pass % 2 == 0;
-    std::vector<Screened> screened;
-    for (size_t i = group_begin; i < group_end; ++i) {
-      if (!quick && !quick_missed[i]) continue;
-      IkResult ik = (quick ? quick_screen : loose_screen).Solve(candidates[i].X_RP, q_now);
-      best_error = std::min(best_error, ik.position_error_m);
-      if (!Converged(ik)) {
-        quick_missed[i] = 1;
-        continue;
-      }
-      if (!left_arm_clear(ik.q)) {
-        ++result.candidates_blocked;
-        continue;
-      }
-      ++result.candidates_feasible;
-      const bool exact = ik.position_error_m <= options.ik.position_tolerance_m * 1.5;
-      screened.push_back({&candidates[i], std::move(ik), exact});
-    }
-    if (!quick) group_begin = group_end;
-    std::stable_sort(screened.begin(), screened.end(), [](const Screened& a, const Screened& b) {
-      return a.exact != b.exact ? a.exact : a.ik.rest_cost < b.ik.rest_cost;
-    });
-    std::optional<Complete> fallback;  // complete but for a clear Cartesian transfer
-  for (const Screened& sc : screened) {
-    if (attempts >= options.max_plan_attempts) break;
-    const Candidate& c = *sc.c;
-    const IkResult& ik = sc.ik;
-    ++attempts;
-    const Eigen::Vector3d& u = c.u;
-    Eigen::Isometry3d X_RP_start = c.X_RP;
-    IkResult start = solver.Solve(X_RP_start, ik.q);
+  const Candidate* chosen = nullptr;
+  for (const Candidate& c : feasible) {
+    Eigen::Isometry3d X_RP_start = c.X_RT * X_TP;
+    IkResult start = solver.Solve(X_RP_start, c.ik.q);
     if (!Converged(start) && options.start_tolerance_m > 0) {
       // At the edge of the workspace: accept a start up to start_tolerance_m off, planned from
       // where the palm really ends, if the tool there is still clear of the object and behind it.
-      const IkResult loose = start_solver.Solve(X_RP_start, ik.q);
+      const IkResult loose = start_solver.Solve(X_RP_start, c.ik.q);
       if (Converged(loose)) {
         const Eigen::Isometry3d X_RT_real = chain.TipPose(loose.q) * X_PT;
         const Eigen::Vector3d c_real = X_RT_real * effector.center_T;
         const Eigen::Matrix3Xd tool = X_RT_real.linear() * (effector.tool_points_T.colwise() - effector.center_T);
         const Eigen::Matrix3Xd eff = X_RT_real.linear() * (effector.points_T.colwise() - effector.center_T);
         const bool above_support = c_real.z() + tool.row(2).minCoeff() >= support_z;
-        if (!geometric || (above_support && start_clear(tool, eff, c_real, u, up.cross(u)) == 1)) {
+        if (!geometric || (above_support && start_clear(tool, eff, c_real) == 1)) {
           start = loose;
           X_RP_start = chain.TipPose(loose.q);
         }
@@ -965,41 +812,45 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       last_failure = Cat("above-start IK: ", ToString(above.status));
       continue;
     }
-    std::vector<Eigen::VectorXd> descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
+    descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
     if (static_cast<int>(descend.size()) < options.descend_waypoints || !left_arm_clear(above.q) ||
         !path_clear(descend)) {
-      last_failure = static_cast<int>(descend.size()) < options.descend_waypoints
-                         ? Cat("descent waypoint ", descend.size() + 1, " IK failed")
-                         : std::string("the left arm comes down to the table during the descent");
+      last_failure = Cat("descent waypoint ", descend.size() + 1, " IK failed");
       continue;
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
     X_RP_end.translation() += options.pull_length_m * u;
-    std::vector<Eigen::VectorXd> drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
+    drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
     while (!drag.empty() && !left_arm_clear(drag.back())) drag.pop_back();
     if (static_cast<int>(drag.size()) < min_drag) {
       last_failure = Cat("drag IK ended after ", drag.size(), " of ", options.drag_waypoints, " waypoints");
       continue;
     }
-    Complete complete{&c, X_RP_start, above.q, {}, {}, std::move(descend), std::move(drag)};
-    if (!plan_transfer(X_RP_above, above.q, &complete.clear, &complete.transfer)) {
-      // Kept as a fallback (joint-space transfer, as a swing may hit the rack or the table) in
-      // case no orientation of this pass has a clear Cartesian transfer.
-      last_failure = "transfer IK or tool clearance failed";
-      if (!fallback) {
-        complete.transfer.clear();
-        fallback = std::move(complete);
-      }
-      continue;
-    }
-    commit(std::move(complete));
+    Eigen::Isometry3d X_RP_last = X_RP_start;
+    X_RP_last.translation() += (options.pull_length_m * drag.size() / options.drag_waypoints) * u;
+    Eigen::Isometry3d X_RP_up = X_RP_last;
+    X_RP_up.translation() += options.approach_height_m * up;
+    lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back());  // optional
+    q_above = above.q;
+    result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
+    chosen = &c;
     break;
   }
-  if (!planned && fallback) commit(std::move(*fallback));
-  }  // screening passes
-  result.plan_attempts = attempts;
+  if (chosen != nullptr) {
+    result.X_RT_start = chosen->X_RT;
+    result.elevation_rad = chosen->elevation;
+    result.yaw_rad = chosen->yaw;
+    result.roll_rad = chosen->roll;
+    result.pull_dir_R = u;
+    result.pull_turn_rad = turn;
+    const Eigen::Vector3d p_RE = chosen->X_RT * effector.center_T;
+    result.start_distance_m = Eigen::Vector2d(p_RE.x() - p_RO.x(), p_RE.y() - p_RO.y()).norm();
+    planned = true;
+    break;
+  }
+  }  // turns
   result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
-  if (result.candidates_feasible == 0) {
+  if (!any_feasible) {
     result.status = PullStatus::kUnreachable;
     result.reason = Cat("no sampled tool orientation puts the effector behind the object (", result.candidates,
                         " sampled; object at ", p_RO.transpose(), " m in R; smallest palm IK error ", best_error,
@@ -1012,6 +863,10 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     return plan;
   }
   result.status = PullStatus::kPulled;
+  plan.q_above = std::move(q_above);
+  plan.descend = std::move(descend);
+  plan.drag = std::move(drag);
+  plan.lift = std::move(lift);
   return plan;
 }
 
@@ -1027,10 +882,44 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   if (!plan.complete()) return result;
   const Eigen::VectorXd& q_above = plan.q_above;
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+
   const double t0 = robot.Time();
-  FollowWaypoints(robot, chain, plan.clear, options.waypoint);
-  FollowWaypoints(robot, chain, plan.transfer, options.waypoint);
-  // Finishes the transfer (the servos lag the waypoints) with the full arrival time.
+  {
+    const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
+    Eigen::Vector3d back(-X_RP_now.translation().x(), -X_RP_now.translation().y(), 0.0);
+    back = back.norm() > 1e-6 ? back.normalized() : Eigen::Vector3d::Zero();
+    Eigen::Isometry3d X_clear = X_RP_now;
+    X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
+    const std::vector<Eigen::VectorXd> clear = LineWaypoints(solver, X_RP_now, X_clear, 4, q_now);
+    FollowWaypoints(robot, chain, clear, options.waypoint);
+    // Then a Cartesian path (position on a line, orientation slerped) to above the start, so the
+    // tool does not swing through the rack or the table as a joint-space move may; the joint-space
+    // move below finishes it (or does all of it when a waypoint does not converge).
+    Eigen::VectorXd q = clear.empty() ? q_now : clear.back();
+    const Eigen::Isometry3d X_from = chain.TipPose(q);
+    const Eigen::Isometry3d X_to = chain.TipPose(q_above);
+    const Eigen::Quaterniond r_from(X_from.linear()), r_to(X_to.linear());
+    std::vector<Eigen::VectorXd> path;
+    constexpr int kTransferWaypoints = 8;
+    for (int i = 1; i <= kTransferWaypoints; ++i) {
+      const double t = static_cast<double>(i) / kTransferWaypoints;
+      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+      X.linear() = r_from.slerp(t, r_to).toRotationMatrix();
+      X.translation() = X_from.translation() + t * (X_to.translation() - X_from.translation());
+      const IkResult r = solver.Solve(X, q);
+      if (!Converged(r)) {
+        path.clear();
+        break;
+      }
+      q = r.q;
+      path.push_back(q);
+    }
+    MotionOptions step = options.waypoint;
+    step.duration = options.transfer.duration / kTransferWaypoints * 1.5;
+    FollowWaypoints(robot, chain, path, step);
+  }
   MoveJoints(robot, ChainGoal(chain, q_above), options.transfer);
   std::string worst;
   const double arm_error = ChainError(robot, chain, q_above, &worst);

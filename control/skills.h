@@ -238,13 +238,6 @@ struct PullOptions {
   /// place it was taken from (the rack) before it swings [m], >= 0; cut short where IK ends.
   double clear_back_m = 0.15;
   double clear_up_m = 0.05;
-  /// The transfer then rises to transfer_rise_m above the pose above the start (or stays higher),
-  /// crosses at that height in transfer_waypoints (>= 1) IK waypoints, orientation slerped, and
-  /// comes down; every waypoint keeps the held tool's lowest point (tool_points_T, else the
-  /// effector centre) transfer_clearance_m above the object's support [m], >= 0 each.
-  double transfer_rise_m = 0.10;
-  int transfer_waypoints = 8;
-  double transfer_clearance_m = 0.03;
   /// The drag direction may turn about z_R away from the action's direction (ActionDirection) by
   /// up to this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first
   /// that plans wins, straight first; for a pull, the start then lies nearer a shoulder).
@@ -261,15 +254,6 @@ struct PullOptions {
   IkOptions ik;                   // waypoint solves
   int screening_restarts = 3;     // cheap IK for sampled orientations: restarts, >= 0
   int screening_ipopt_iterations = 10;  // and Ipopt iterations, > 0
-  /// Screening runs per drag turn in two passes: first a quick one over all orientations with at
-  /// most quick_screening_restarts restarts (>= 0) and quick_screening_ipopt_iterations Ipopt
-  /// iterations (> 0), whose hits are planned first; the full screen (above) then runs only over
-  /// the orientations the quick pass missed, when none of its hits planned. At most
-  /// max_plan_attempts (> 0) screened orientations are planned in full before the skill gives up
-  /// (kIkFailed).
-  int quick_screening_restarts = 1;
-  int quick_screening_ipopt_iterations = 2;
-  int max_plan_attempts = 40;
   void Validate() const;  // throws std::invalid_argument naming the field and its value
 };
 
@@ -298,8 +282,7 @@ struct PullResult {
   double yaw_rad = 0.0;
   double roll_rad = 0.0;
   int candidates = 0;            // orientations sampled
-  int candidates_feasible = 0;   // screened with a converged start-pose IK (screening stops at the first plan)
-  int plan_attempts = 0;         // of those, planned in full
+  int candidates_feasible = 0;   // with a converged start-pose IK
   int candidates_blocked = 0;    // with no collision-free start behind the object, or the palm too low
   double start_distance_m = 0.0; // horizontal distance object centre -> effector centre at the start [m]
   double plan_ms = 0.0;          // wall time of planning [ms], informational
@@ -311,9 +294,7 @@ struct PullResult {
 /// else kUnreachable or kIkFailed with the reason; the postures are then empty.
 struct PullPlan {
   PullResult result;
-  std::vector<Eigen::VectorXd> clear;     // straight back toward the robot and up, leaving the rack
-  std::vector<Eigen::VectorXd> transfer;  // up, across and down to above the start (last = q_above)
-  Eigen::VectorXd q_above;                // above the start
+  Eigen::VectorXd q_above;                // above the start (the joint-space transfer ends here)
   std::vector<Eigen::VectorXd> descend;   // straight descent to the start (last = the start)
   std::vector<Eigen::VectorXd> drag;      // the drag along result.pull_dir_R
   std::vector<Eigen::VectorXd> lift;      // the lift after the drag (may be shorter than asked)
@@ -342,18 +323,11 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
 ///  2. samples tool orientations: the palm -> effector line points away from the robot and down
 ///     (elevation, yaw about z_R from the horizontal direction from the robot's axis to the
 ///     object, turned as u is), the working direction as close to u as that allows (roll),
-///     screens them with IK of the palm pose X_RP = X_RT * X_PT^-1 (per drag turn, a quick pass,
-///     then a full one over what it missed: see quick_screening_restarts), and plans those that
-///     screened, exact screens first, then lowest rest cost: above the start (approach_height_m
-///     up), straight descent, straight drag of pull_length_m along u (cut short where IK ends,
-///     not below min_pull_fraction), lift, and the transfer from the current posture (back from
-///     the rack and up, up to transfer height, across, down; the tool's lowest point kept
-///     transfer_clearance_m above the support). The first complete plan wins; when no screened
-///     orientation of a pass has a clear transfer, the first otherwise complete one is taken with
-///     a joint-space transfer;
-///  3. moves there (the transfer waypoints, then joint space onto the posture above the start,
-///     then the waypoints) keeping the hand closed, and checks from the finger encoders that the
-///     tool is still in the hand.
+///     screens each with a cheap IK of the palm pose X_RP = X_RT * X_PT^-1, then plans, lowest
+///     rest cost first: above the start (approach_height_m up), straight descent, straight drag
+///     of pull_length_m along u (cut short where IK ends, not below min_pull_fraction), lift;
+///  3. moves there (joint space to above the start, then the waypoints) keeping the hand closed,
+///     and checks from the finger encoders that the tool is still in the hand.
 /// `X_PT` is the tool in the palm frame as the grasp left it (handle pose times the planned palm
 /// pose: GraspResult::X_RP_grasp.inverse() * X_RH * X_TH.inverse()); `p_RO` the object centre in R.
 /// Never throws for an unreachable object (a status). Throws std::invalid_argument for bad
