@@ -241,6 +241,8 @@ int RunPullBench(const BenchRequest& request) {
                           {"pull_candidates_blocked", r.pull.candidates_blocked},
                           {"pull_start_distance_m", r.pull.start_distance_m},
                           {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
+                          {"pull_plan_ms", r.pull.plan_ms},
+                          {"pull_motion_s", r.pull.motion_s},
                           {"put_down", r.put_down},
                           {"ball_grasp_tried", r.ball_grasp_tried},
                           {"ball_grasped", r.ball_grasped},
@@ -262,6 +264,7 @@ void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines
   std::map<std::string, PullTally> per_family;
   std::map<std::string, int> reasons;
   PullTally total;
+  std::vector<double> plan_ms;  // PullResult::plan_ms of every case that reached the pull
   std::string cell = PullCaseOptions{}.cell;
   int failed = 0;
   for (const SweepLine& line : lines) {
@@ -282,6 +285,9 @@ void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines
     }
     const std::string reason = r.at("reason").get<std::string>();
     if (!reason.empty()) ++reasons[reason.substr(0, reason.find(':'))];
+    if (r.at("grasped").get<bool>() && r.contains("pull_plan_ms")) {
+      plan_ms.push_back(r.at("pull_plan_ms").get<double>());
+    }
   }
   auto ratio = [](int k, int n) { return n > 0 ? static_cast<double>(k) / n : std::nan(""); };
   auto tally_json = [&](const PullTally& t) {
@@ -299,6 +305,10 @@ void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines
   summary["shard_count"] = request.shard_count;
   summary["failed_cases"] = failed;
   summary["cell"] = cell;
+  if (!plan_ms.empty()) {
+    summary["pull_plan_ms_median"] = Percentile(plan_ms, 50);
+    summary["pull_plan_ms_max"] = *std::max_element(plan_ms.begin(), plan_ms.end());
+  }
   summary["success_criterion"] =
       "pull success: after the pull the ball is within reach, i.e. a palm pose grasping it from above (or tilted "
       "toward the robot up to 57 deg) has a converged IK from the home posture; displacement = ball motion along the "
