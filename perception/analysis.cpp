@@ -35,6 +35,12 @@ void AnalyzerOptions::Validate() const {
   if (!(min_known_confidence >= 0.0 && min_known_confidence <= 1.0)) {
     ThrowInvalid("AnalyzerOptions: min_known_confidence = ", min_known_confidence, " (expected in [0, 1])");
   }
+  if (!(max_outside_fraction > 0.0 && max_outside_fraction <= 1.0)) {
+    ThrowInvalid("AnalyzerOptions: max_outside_fraction = ", max_outside_fraction, " (expected in (0, 1])");
+  }
+  if (!(outside_margin_m >= 0.0)) {
+    ThrowInvalid("AnalyzerOptions: outside_margin_m = ", outside_margin_m, " (expected >= 0)");
+  }
 }
 
 AnalyzerOptions AnalyzerOptions::Thesis() {
@@ -49,8 +55,29 @@ AnalyzerOptions AnalyzerOptions::Thesis() {
   fit.visible_rounds = 0;
   fit.view_spin_steps = 0;  // no depth-image check of the turn about the handle
   options.cache_shapes = false;  // reconstruction, SDF and superquadrics for every tool, every time
+  options.max_outside_fraction = 1.0;  // the thesis has no unknown tools: no scale check
   return options;
 }
+
+namespace {
+
+/// Fraction of the points p_R (3 x N, in R) that lie outside the bounding box of `model`'s mesh
+/// (in T, placed at X_RT) grown by margin on every side; 0 for no points.
+double FractionOutsideModel(const Eigen::Matrix3Xf& p_R, const toollib::ToolModel& model, const Eigen::Isometry3d& X_RT,
+                            double margin) {
+  if (p_R.cols() == 0 || model.mesh.vertices.cols() == 0) return 0.0;
+  const Eigen::Vector3d lo = model.mesh.vertices.rowwise().minCoeff().array() - margin;
+  const Eigen::Vector3d hi = model.mesh.vertices.rowwise().maxCoeff().array() + margin;
+  const Eigen::Isometry3d X_TR = X_RT.inverse();
+  Eigen::Index outside = 0;
+  for (Eigen::Index i = 0; i < p_R.cols(); ++i) {
+    const Eigen::Vector3d p_T = X_TR * p_R.col(i).cast<double>();
+    if ((p_T.array() < lo.array()).any() || (p_T.array() > hi.array()).any()) ++outside;
+  }
+  return static_cast<double>(outside) / static_cast<double>(p_R.cols());
+}
+
+}  // namespace
 
 Eigen::Isometry3d SidecarHandleFrame(const toollib::ToolModel& model) {
   const Eigen::Vector3d z = model.handle.axis.normalized();
@@ -221,8 +248,14 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
         analysis.confidence = recognition.confidence;
         analysis.X_RT = recognition.fit.X_RT;
         analysis.fit_error = recognition.fit.fit_error;
-        analysis.known = recognition.confidence >= impl_->options.min_known_confidence &&
-                         recognition.fit.fit_error <= impl_->options.max_known_fit_error;
+        const double outside =
+            FractionOutsideModel(cloud.p_R, *model, recognition.fit.X_RT, impl_->options.outside_margin_m);
+        const bool fits_model = recognition.fit.fit_error <= impl_->options.max_known_fit_error &&
+                                outside <= impl_->options.max_outside_fraction;
+        analysis.known = recognition.confidence >= impl_->options.min_known_confidence && fits_model;
+        // The confidence is the probability that the tool is `model`: none when its geometry says
+        // it is not (too poor a fit, or larger than the model).
+        if (!fits_model) analysis.confidence = 0.0;
         if (analysis.known) {
           impl_->PlaceShape(*model, analysis);
         } else {
@@ -233,8 +266,9 @@ FrameAnalysis ToolAnalyzer::Analyze(const RgbdFrame& frame) const {
           Impl::Adopt(shape, analysis);
           if (analysis.status == AnalysisStatus::kOk) {
             analysis.reason =
-                Cat("unknown tool (closest library model ", recognition.model, ", confidence ", recognition.confidence,
-                    ", fit error ", recognition.fit.fit_error * 1000, " mm): analysed from the observed cloud");
+                Cat("unknown tool (closest library model ", recognition.model, ", classifier confidence ",
+                    recognition.confidence, ", fit error ", recognition.fit.fit_error * 1000, " mm, ", 100 * outside,
+                    " % of the points outside the model): analysed from the observed cloud");
           }
         }
         times.shape_ms = Ms(t);

@@ -32,13 +32,21 @@ struct AnalyzerOptions {
   /// max_known_fit_error [m], > 0; otherwise it is analysed as an unknown tool from its cloud.
   double min_known_confidence = 0.3;
   double max_known_fit_error = 0.006;
+  /// Scale check: a tool is not the recognised model when more than max_outside_fraction, in
+  /// (0, 1], of its observed points lie outside the model's bounding box (in T, at the fitted
+  /// pose) grown by outside_margin_m [m], >= 0, on every side. Partial views only ever shrink
+  /// the observed extent, so a larger tool that ICP fits well locally (a library tool scaled by
+  /// 1.3 fits within the fit-error limit) is caught by its overhang. 1 = off.
+  double max_outside_fraction = 0.05;
+  double outside_margin_m = 0.012;
   void Validate() const;  // throws std::invalid_argument naming the field
 
   /// The thesis's configuration (chapter 4) as the baseline to compare against:
   /// point-to-point ICP with 500 iterations and the thesis's epsilons on 4000
   /// model points, principal-axes initialisation only (no flip candidates), no
   /// visible-surface scoring rounds, no depth-image check of the turn about the handle; parts,
-  /// superquadrics and handle computed for every tool, every time (no shape cache).
+  /// superquadrics and handle computed for every tool, every time (no shape cache); no scale
+  /// check.
   static AnalyzerOptions Thesis();
 };
 

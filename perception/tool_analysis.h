@@ -69,8 +69,10 @@ struct ToolAnalysis {
   std::string model;         // recognised library model; for an unknown tool (known = false) the
                              // closest library model, empty when no model could be fitted
   bool known = false;        // true: a library model was recognised with enough confidence
-                             // (AnalyzerOptions::min_known_confidence) and fit (max_known_fit_error)
-  double confidence = 0.0;   // in [0, 1]: the recogniser's probability of `model`
+                             // (AnalyzerOptions::min_known_confidence), fit (max_known_fit_error)
+                             // and extent (max_outside_fraction: not larger than the model)
+  double confidence = 0.0;   // in [0, 1]: the recogniser's probability of `model`; 0 when the
+                             // fit or the extent rules `model` out (an unknown tool)
   Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();  // tool frame T in R: the fitted model's
                              // when known, else estimated from the observed handle
   double fit_error = 0.0;    // mean observed-to-model distance of `model`'s fit [m]

@@ -2,9 +2,11 @@
 // name, from a --tool-dir folder) is put on the rack, and the robot's perception, which knows
 // only the asset library, must analyse it from its observed cloud (reconstruct, segment,
 // superquadrics, handle) as unknown, with a handle near the user tool's sidecar handle.
-// Caveat measured while writing this test: most generated tools scaled by 1.3 (hoe_2, hook_2,
-// hammer_2, spatula_2, lstick_3, shovel_2, rake_3, hook_3) fit some library variant within the
-// 6 mm known-tool threshold and are taken for it; rake_2 x 1.3 (closest rake_4, 8.1 mm) is not.
+// Most generated tools scaled by 1.3 fit some library variant within the 6 mm fit-error limit;
+// the scale check (AnalyzerOptions::max_outside_fraction: points beyond the model's extent)
+// is what rules the closest model out for them. spatula_2 x 1.3 is rejected too, but its
+// observed cloud comes out as one part and the handle centre lands 34 mm off: the analysis of
+// unknown clouds is still weak on flat-bladed tools.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -115,8 +117,7 @@ TEST_P(UnknownToolTest, AnalysedFromItsCloudWithTheHandleNearTheSidecars) {
   // Low confidence, stated: either the recogniser's probability is below the threshold, or its
   // best fit is too poor to take the tool for that model.
   const AnalyzerOptions options = app::DefaultAnalyzerOptions();
-  EXPECT_TRUE(a.confidence < options.min_known_confidence || a.fit_error > options.max_known_fit_error)
-      << "confidence " << a.confidence << " fit error " << a.fit_error;
+  EXPECT_LT(a.confidence, options.min_known_confidence) << "fit error " << a.fit_error;
   EXPECT_GE(a.parts.size(), 1u);
   EXPECT_LT(handle_error, kHandleTol);
   EXPECT_LT(axis_error, kAxisTolDeg);
@@ -124,7 +125,9 @@ TEST_P(UnknownToolTest, AnalysedFromItsCloudWithTheHandleNearTheSidecars) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ScaledGeneratedTools, UnknownToolTest,
-                         ::testing::Values(Case{"rake_2", 1.3}), CaseName);
+                         ::testing::Values(Case{"rake_2", 1.3}, Case{"hoe_2", 1.3}, Case{"hammer_2", 1.3},
+                                           Case{"lstick_3", 1.3}),
+                         CaseName);
 
 }  // namespace
 }  // namespace toolbench::perception
