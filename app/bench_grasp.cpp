@@ -112,6 +112,14 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
     grasp_options.handle_slide_m =
         std::max(0.0, (model->handle.length - scene.robot.grasp.length) / 2 - options.slide_margin_m);
   }
+  if (!frame_png.empty()) {
+    // One picture per stage beside the final one: <stem>_<stage>.png.
+    grasp_options.on_stage = [&world, &frame_png](const char* stage) {
+      std::filesystem::path png = frame_png;
+      png.replace_filename(frame_png.stem().string() + "_" + stage + ".png");
+      WriteOverviewPng(world, png);
+    };
+  }
   out.grasp = control::GraspHandle(robot, scene.robot, X_RH, grasp_options);
   auto finish = [&] {
     if (!frame_png.empty()) WriteOverviewPng(world, frame_png);

@@ -50,7 +50,8 @@ struct GraspCaseResult {
 /// from its ground-truth pose (X_RT times the handle segment: this isolates control from
 /// perception), lifts, holds and scores. Never throws for a failed grasp (it is a result).
 /// Throws std::invalid_argument for an unknown tool or cell, or bad options. `frame_png`, when
-/// not empty, receives an overview image of the end of the case.
+/// not empty, receives an overview image of the end of the case, and <stem>_<stage>.png one of
+/// each stage of the grasp (GraspOptions::on_stage).
 GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, const std::string& cell,
                              std::uint64_t seed, const GraspCaseOptions& options = {},
                              const std::filesystem::path& frame_png = {});

@@ -95,6 +95,11 @@ void GraspOptions::Validate() const {
   if (!(lift_m >= 0)) fail("lift_m", lift_m, ">= 0");
   if (lift_waypoints < 1) fail("lift_waypoints", lift_waypoints, ">= 1");
   if (!(lift_retreat_m >= 0)) fail("lift_retreat_m", lift_retreat_m, ">= 0");
+  if (!(lift_max_m >= 0)) fail("lift_max_m", lift_max_m, ">= 0");
+  if (!(lift_step_m > 0)) fail("lift_step_m", lift_step_m, "> 0");
+  if (path_restarts < 0) fail("path_restarts", path_restarts, ">= 0");
+  if (path_ipopt_iterations < 1) fail("path_ipopt_iterations", path_ipopt_iterations, "> 0");
+  if (!(fallback_max_error_m >= 0)) fail("fallback_max_error_m", fallback_max_error_m, ">= 0");
   if (!(preshape_time > 0)) fail("preshape_time", preshape_time, "> 0");
   if (!(close_time >= 0.5)) fail("close_time", close_time, ">= 0.5");
   if (!(settle_time >= 0)) fail("settle_time", settle_time, ">= 0");
@@ -139,7 +144,13 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   }
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
-  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  // Path waypoints are warm-started from their neighbour on the path: a restart from elsewhere
+  // would land in another IK branch (a jump, not a straight line), so few restarts and a short
+  // Ipopt run make a failing waypoint cheap.
+  IkOptions path_options = options.ik;
+  path_options.presolve_restarts = options.path_restarts;
+  path_options.max_iterations = options.path_ipopt_iterations;
+  CartesianSolver solver(chain, desc.HomeQ(), path_options);
   const std::vector<std::string> names = robot.JointNames();
   for (const auto* hand : {&desc.hand_open, &desc.hand_preshape, &desc.hand_closed}) {
     for (const auto& [joint, value] : *hand) {
@@ -238,15 +249,25 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
       q = r.q;
       p.approach.push_back(q);
     }
-    // Straight up first; at the edge of the workspace, up and back toward the robot.
-    for (const double retreat : {0.0, options.lift_retreat_m}) {
+    // Up and back toward the robot first (away from the board and its rail, which a tool lying
+    // across the rack would catch when lifted straight up); straight up when that is out of
+    // reach. The lift goes on in steps of lift_step_m up to lift_max_m while IK converges (a
+    // tool that pivots in the grip hangs lower than the hand) and counts once it reached lift_m.
+    for (const double retreat : {options.lift_retreat_m, 0.0}) {
       if (!ok || !p.lift.empty()) break;
       Eigen::VectorXd q_lift = q;
       std::vector<Eigen::VectorXd> lift;
-      for (int i = 1; i <= options.lift_waypoints; ++i) {
+      // Tools hang from a level handle (lying across the rack) and pivot in the grip: the extra
+      // height over lift_m grows with how level the handle is (none for an upright handle, whose
+      // tool comes up straight; lifting heavy upright tools higher loosens the grip).
+      const double level = 1.0 - std::abs(R_RH.col(2).z());
+      const double top = options.lift_m + std::max(0.0, options.lift_max_m - options.lift_m) * level;
+      const int n = std::max(options.lift_waypoints, static_cast<int>(std::ceil(top / options.lift_step_m - 1e-9)));
+      double reached = 0.0;
+      for (int i = 1; i <= n; ++i) {
         Eigen::Isometry3d X = c.X_RP;
-        const double s = static_cast<double>(i) / options.lift_waypoints;
-        X.translation() += s * (options.lift_m * Eigen::Vector3d::UnitZ() - retreat * outward);
+        const double s = static_cast<double>(i) / n;
+        X.translation() += s * (top * Eigen::Vector3d::UnitZ() - retreat * outward);
         const IkResult r = solver.Solve(X, q_lift);
         if (!Converged(r)) {
           last_failure = Cat("lift waypoint ", i, " (retreat ", retreat, " m) IK: ", ToString(r.status), ", ",
@@ -255,8 +276,9 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
         }
         q_lift = r.q;
         lift.push_back(q_lift);
+        reached = s * top;
       }
-      if (static_cast<int>(lift.size()) == options.lift_waypoints) p.lift = std::move(lift);
+      if (reached >= options.lift_m - 1e-9) p.lift = std::move(lift);
     }
     ok = ok && !p.lift.empty();
     // Then back toward the robot, away from the board (optional: kept only when reachable).
@@ -300,6 +322,9 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   bool planned = false;
   // Pass 0: cheap screening; pass 1 (only when pass 0 found no reachable pose at all): a
   // stronger solver and a wider approach cone, for handles at the edge of the workspace.
+  // Position error of each candidate's screening solve, by slide and sample index: the second
+  // pass retries only those that came within fallback_max_error_m.
+  std::map<std::pair<size_t, int>, double> screen_error;
   for (int pass = 0; pass < 2 && !planned; ++pass) {
     if (pass == 1 && (result.candidates_feasible > 0 || options.fallback_restarts == 0)) break;
     CartesianSolver screen(chain, desc.HomeQ(), pass == 0 ? screen_options : fallback_options);
@@ -318,7 +343,13 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
         const Eigen::Vector3d approach_dir = X_RP.linear().col(2);  // palm -> handle
         if (approach_dir.dot(outward) < min_cos) continue;
         if (approach_dir.z() > options.max_approach_up_cos) continue;
+        if (pass == 1) {
+          const auto it = screen_error.find({i, n});
+          // Not screened before: outside the first pass's approach cone, new here.
+          if (it != screen_error.end() && it->second > options.fallback_max_error_m) continue;
+        }
         IkResult ik = screen.Solve(X_RP, q_now);
+        if (pass == 0) screen_error[{i, n}] = ik.position_error_m;
         best_error = std::min(best_error, ik.position_error_m);
         if (Converged(ik)) feasible.push_back({X_RP, roll, flipped, slides[i], std::move(ik)});
       }
@@ -359,6 +390,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
   const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
   result.transfer_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("staged");
   if (!transfer.reached && transfer.max_error > options.arm_arrival_tol) {
     result.status = GraspStatus::kMotionTimeout;
     result.reason = Cat("pre-grasp not reached: ", transfer.worst_joint, " off by ", transfer.max_error, " rad");
@@ -372,6 +404,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   CompensateSag(robot, names, chain, plan.approach.back(), options.sag_iterations, options.sag_wait,
                 options.sag_max_offset_rad);
   result.approach_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("at_grasp");
 
   // 3. Preshape, then ramp to closed: the fingers stop on the handle while their targets go on
   // to hand_closed, which squeezes it (the servo error times kp is the grip force).
@@ -385,6 +418,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   MoveJoints(robot, desc.hand_closed, close);
   robot.Wait(options.settle_time);
   result.close_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("closed");
   {
     // Empty hand: every long finger joint reached its closed target.
     const Eigen::VectorXd enc = robot.ReadEncoders();
@@ -408,6 +442,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
                 options.sag_max_offset_rad);
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("lifted");
   result.status = GraspStatus::kGrasped;
   return result;
 }

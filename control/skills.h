@@ -46,13 +46,20 @@ struct GraspOptions {
   double staging_back_m = 0.10;
   double staging_up_m = 0.08;
   int approach_waypoints = 4;  // IK waypoints on the straight line pre-grasp -> grasp, >= 1
-  /// Straight lift along z_R after closing [m], >= 0. More than the 5 cm success margin: tools
-  /// lying across the rack pivot in the grip as they come up, so their origin rises less.
+  /// Smallest lift along z_R after closing [m], >= 0 (see lift_max_m, lift_retreat_m). More than
+  /// the 5 cm success margin: tools lying across the rack pivot in the grip as they come up, so
+  /// their origin rises less.
   double lift_m = 0.11;
-  int lift_waypoints = 4;      // IK waypoints of the lift, >= 1
-  /// When the straight lift is out of reach, the lift also moves this far back toward the robot
-  /// (horizontally, toward the root's z axis) [m], >= 0.
-  double lift_retreat_m = 0.06;
+  int lift_waypoints = 4;      // IK waypoints of the lift (at least), >= 1
+  /// The lift goes on past lift_m, in straight steps of at most lift_step_m (> 0), while IK
+  /// converges, up to lift_m + (lift_max_m - lift_m) * (1 - |cos(handle axis, z_R)|) [m], >= 0:
+  /// a tool held by a level handle (lying across the rack) pivots in the grip and its far end
+  /// hangs lower than the hand; heavy upright tools lifted higher than needed loosen the grip.
+  double lift_max_m = 0.17;
+  double lift_step_m = 0.03;
+  /// The lift also moves this far back toward the robot (horizontally, toward the root's z
+  /// axis), away from the board [m], >= 0; straight up when that is out of reach.
+  double lift_retreat_m = 0.08;
   /// After the lift, the hand moves this far back toward the robot (horizontally), pulling the
   /// tool off the board, when IK reaches it [m], >= 0.
   double retreat_m = 0.05;
@@ -79,13 +86,26 @@ struct GraspOptions {
   /// Screening the sampled palm poses (most are out of reach) uses ik with fewer restarts and
   /// Ipopt iterations: presolve_restarts, >= 0, and max_iterations, > 0.
   int screening_restarts = 3;
-  int screening_ipopt_iterations = 10;
+  int screening_ipopt_iterations = 3;
   /// When the cheap screening finds no reachable palm pose at all (handles at the edge of the
   /// workspace), screen again with this many restarts and Ipopt iterations (0 = no second pass),
   /// and with min_approach_cos lowered to fallback_min_approach_cos.
   int fallback_restarts = 12;
   int fallback_ipopt_iterations = 60;
   double fallback_min_approach_cos = 0.0;
+  /// The second pass retries only palm poses whose first screening solve ended within this
+  /// distance of the target [m], >= 0 (farther ones are out of reach: retrying them costs
+  /// seconds), besides those the wider cone adds.
+  double fallback_max_error_m = 0.03;
+  /// Path waypoints (pre-grasp, staging, approach, lift) are solved warm-started from their
+  /// neighbour with this many restarts (>= 0) and Ipopt iterations (> 0): a restart elsewhere
+  /// would jump IK branches, so a waypoint that fails from its neighbour fails the path.
+  int path_restarts = 1;
+  int path_ipopt_iterations = 30;
+  /// Called, when set, after each stage that moved the robot, with the stage's name: "staged"
+  /// (joint-space transfer done), "at_grasp" (approach done, hand open), "closed", "lifted".
+  /// For observers (e.g. the bench writing a picture per stage); must not move the robot.
+  std::function<void(const char* stage)> on_stage;
   void Validate() const;  // throws std::invalid_argument naming the field and its value
 };
 
@@ -130,15 +150,16 @@ struct GraspResult {
 ///  2. for the first slide offset that has any, takes the reachable poses by increasing IK rest
 ///     cost and plans the path: pre-grasp (pregrasp_back_m behind along -z_P, pregrasp_up_m
 ///     above), staging pose (further back and up), straight-line IK waypoints staging ->
-///     pre-grasp -> grasp and grasp -> lift_m straight up (or up and back, lift_retreat_m, at the
-///     edge of the workspace), each solve warm-started from the previous posture. The first
+///     pre-grasp -> grasp and the lift: up and back toward the robot (lift_retreat_m; straight up
+///     when that is out of reach), at least lift_m and up to lift_max_m, each solve warm-started
+///     from the previous posture (path_restarts, path_ipopt_iterations). The first
 ///     complete path wins; nothing moves before one is found;
 ///  3. opens the hand and moves (MoveJoints, joint space) to the staging pose, follows the
 ///     waypoints to the grasp, preshapes the hand, ramps it to desc.hand_closed over close_time,
 ///     checks the fingers stopped on something, lifts along the waypoints and holds hold_time.
 /// The hold is by contact forces only. `X_RH` is the handle frame in R: origin at the handle
-/// centre, z along the handle axis (its sign does not matter). Takes 2-5 s of wall time, most
-/// of it IK screening when the handle is at the edge of the workspace.
+/// centre, z along the handle axis (its sign does not matter). Planning takes ~0.2-1.5 s of wall
+/// time (most of it IK screening of palm poses at the edge of the workspace).
 /// Throws std::invalid_argument for bad options, a non-finite X_RH or one whose rotation part is
 /// not a rotation, and when desc has no right-arm chain or robot lacks a joint of desc's hand.
 GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_RH,

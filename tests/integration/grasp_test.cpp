@@ -31,6 +31,22 @@ TEST_P(GraspTest, GraspsLiftsAndHoldsFromGroundTruthHandle) {
 
 INSTANTIATE_TEST_SUITE_P(StickAndHoe, GraspTest, ::testing::Values("stick_2", "hoe_2"));
 
+// A tool lying across the rack (cell rot3) catches the board's rail when lifted straight up; the
+// lift goes up and back toward the robot (failed with "foreign_contact: rack" before).
+TEST(GraspHandle, GraspsAndLiftsAToolLyingAcrossTheRack) {
+  SceneRequest request;
+  request.tools = {"lstick_2"};
+  request.cells = {"rot3"};
+  const LoadedScene scene = LoadScene(request);
+  const GraspCaseResult r = RunGraspCase(scene, "lstick_2", "rot3", request.seed);
+  ASSERT_TRUE(r.settled) << "the tool did not come to rest on the rack";
+  ASSERT_EQ(r.grasp.status, control::GraspStatus::kGrasped) << r.grasp.reason;
+  EXPECT_GE(r.lift_m, kMinLiftM);
+  EXPECT_LT(r.slip_m, kMaxSlipM);
+  EXPECT_THAT(r.foreign_contacts, ::testing::IsEmpty());
+  EXPECT_TRUE(r.success) << r.reason;
+}
+
 TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
   SceneRequest request;
   request.tools = {"stick_2"};
