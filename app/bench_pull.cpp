@@ -265,7 +265,7 @@ void ReportPull(const BenchRequest& request, const std::vector<SweepLine>& lines
   std::map<std::string, int> reasons;
   PullTally total;
   std::vector<double> plan_ms;  // PullResult::plan_ms of every case that reached the pull
-  std::string cell = PullCaseOptions{}.cell;
+  std::string cell = kPullCell;
   int failed = 0;
   for (const SweepLine& line : lines) {
     if (!line.value("ok", false)) {

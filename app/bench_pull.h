@@ -10,9 +10,12 @@
 
 namespace toolbench::app {
 
+/// The rack cell pull-gt puts each tool in by default.
+inline constexpr const char* kPullCell = "rot0";
+
 /// How one ground-truth pull case runs and is judged.
 struct PullCaseOptions {
-  std::string cell = "rot0";        // rack cell of the tool (Table 5.3 name)
+  std::string cell = kPullCell;     // rack cell of the tool (Table 5.3 name)
   /// Ball centre range (x, then y, in R) drawn from the case seed, replacing the scene's [m]: as
   /// in scenes/default.json, just out of the arm's reach (BallInReach is false for x <= -0.60 at
   /// every y in the range; a top grasp reaches x = -0.59), so the pull must bring it closer.
