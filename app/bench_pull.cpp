@@ -16,6 +16,7 @@
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
+#include "robot/robot_model.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
 
@@ -143,21 +144,25 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
       control::BallInReach(scene.robot, scene.robot.HomeQ(), out.ball_start_R, radius, options.ball_grasp);
 
   // 1. Grasp from the ground-truth handle, choked toward the end away from the effector (the
-  // tool then reaches further): 60 % of the way to the end, else 30 %, else the centre.
-  // A grasp that found no plan has not moved the robot, so the next choke can be tried.
+  // tool then reaches further): 60 % of the way to the end, else 30 %, else the centre; with the
+  // effector on the +y_P side of the hand first (HandleTowardEffector), else either way round.
+  // A grasp that found no plan has not moved the robot, so the next one can be tried.
   const double free_slide = std::max(0.0, (model->handle.length - scene.robot.grasp.length) / 2 - 0.01);
-  const Eigen::Vector3d toward_effector_R =
-      X_RH.linear() * X_TH.linear().transpose() * (model->effector.center - model->handle.center);
-  const double sign = toward_effector_R.dot(X_RH.linear().col(2)) >= 0 ? -1.0 : 1.0;
-  Eigen::Isometry3d X_RH_grasped = X_RH;
-  for (const double choke : {0.6, 0.3, 0.0}) {
-    X_RH_grasped = X_RH;
-    X_RH_grasped.translation() += sign * choke * free_slide * X_RH.linear().col(2);
-    control::GraspOptions grasp_options = options.grasp;
-    out.grasp = control::GraspHandle(robot, scene.robot, X_RH_grasped, grasp_options);
-    if (out.grasp.status != control::GraspStatus::kUnreachable && out.grasp.status != control::GraspStatus::kIkFailed) {
-      break;
+  const Eigen::Vector3d p_R_effector = X_RW * X_WT_rest * model->effector.center;
+  const Eigen::Isometry3d X_RH_toward = control::HandleTowardEffector(X_RH, p_R_effector);
+  bool planned = false;
+  for (const int direction : {1, 0}) {
+    for (const double choke : {0.6, 0.3, 0.0}) {
+      Eigen::Isometry3d X_RH_grasped = X_RH_toward;
+      X_RH_grasped.translation() -= choke * free_slide * X_RH_toward.linear().col(2);
+      control::GraspOptions grasp_options = options.grasp;
+      grasp_options.axis_direction = direction;
+      out.grasp = control::GraspHandle(robot, scene.robot, X_RH_grasped, grasp_options);
+      planned = out.grasp.status != control::GraspStatus::kUnreachable &&
+                out.grasp.status != control::GraspStatus::kIkFailed;
+      if (planned) break;
     }
+    if (planned) break;
   }
   frame("1_grasp");
   if (out.grasp.status != control::GraspStatus::kGrasped) {
@@ -170,8 +175,43 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   // 2. Pull. The in-hand pose is what the robot knows: the planned palm pose at the grasp and the
   // handle pose it grasped.
   const Eigen::Isometry3d X_PT = out.grasp.X_RP_grasp.inverse() * X_RH * X_TH.inverse();
+  out.ball_moved_by_grasp_m = (ball_R() - out.ball_start_R).norm();
+  out.in_hand_effector_dir_P = (X_PT * model->effector.center).normalized();
+  out.in_hand_working_dir_P = X_PT.linear() * Eigen::Vector3d::UnitX();
+  {
+    // How the tool sits in the hand after the lift (ground truth) against what the robot assumes.
+    const Eigen::Isometry3d X_PT_truth =
+        robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
+                        scene.robot.palm_frame)
+            .inverse() *
+        X_RW * world.ground_truth().Pose(body);
+    out.lift_slip_m = (X_PT_truth * model->effector.center - X_PT * model->effector.center).norm();
+    out.lift_pivot_deg = Eigen::AngleAxisd(X_PT_truth.linear() * X_PT.linear().transpose()).angle() * 180 / M_PI;
+  }
   out.ball_start_R = ball_R();
-  out.pull = control::PullObject(robot, scene.robot, X_PT, EffectorOf(*model), out.ball_start_R, radius, options.pull);
+  control::PullOptions pull_options = options.pull;
+  // Where the tool really is at the start of the drag (ground truth), against where the plan put
+  // it, and the palm from the encoders against the tool: sag of the arm vs slip in the hand.
+  int stage_index = 0;
+  Eigen::Isometry3d X_RT_at_start = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d X_RP_at_start = Eigen::Isometry3d::Identity();
+  bool reached_start = false;
+  pull_options.on_stage = [&](const char* stage) {
+    if (std::string(stage) == "at_start") {
+      reached_start = true;
+      out.ball_moved_before_drag_m = (ball_R() - out.ball_start_R).norm();
+      X_RT_at_start = X_RW * world.ground_truth().Pose(body);
+      X_RP_at_start = robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
+                                      scene.robot.palm_frame);
+    }
+    if (!frames_dir.empty()) frame("2" + std::string(1, static_cast<char>('a' + stage_index++)) + "_pull_" + stage);
+  };
+  out.pull = control::PullObject(robot, scene.robot, X_PT, EffectorOf(*model), out.ball_start_R, radius, pull_options);
+  if (reached_start) {
+    const Eigen::Vector3d p_TE = model->effector.center;
+    out.start_effector_error_m = (X_RT_at_start * p_TE - out.pull.X_RT_start * p_TE).norm();
+    out.start_slip_m = (X_RT_at_start * p_TE - X_RP_at_start * X_PT * p_TE).norm();
+  }
   robot.Wait(options.settle_after_s);
   frame("2_pull");
   out.ball_end_R = ball_R();
@@ -243,6 +283,16 @@ int RunPullBench(const BenchRequest& request) {
                           {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
                           {"pull_plan_ms", r.pull.plan_ms},
                           {"pull_motion_s", r.pull.motion_s},
+                          {"grasp_roll_deg", r.grasp.roll_rad * 180 / M_PI},
+                          {"grasp_axis_flipped", r.grasp.axis_flipped},
+                          {"in_hand_effector_dir_P", vec(r.in_hand_effector_dir_P)},
+                          {"in_hand_working_dir_P", vec(r.in_hand_working_dir_P)},
+                          {"lift_slip_m", r.lift_slip_m},
+                          {"lift_pivot_deg", r.lift_pivot_deg},
+                          {"start_effector_error_m", r.start_effector_error_m},
+                          {"start_slip_m", r.start_slip_m},
+                          {"ball_moved_by_grasp_m", r.ball_moved_by_grasp_m},
+                          {"ball_moved_before_drag_m", r.ball_moved_before_drag_m},
                           {"put_down", r.put_down},
                           {"ball_grasp_tried", r.ball_grasp_tried},
                           {"ball_grasped", r.ball_grasped},

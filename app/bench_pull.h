@@ -1,5 +1,6 @@
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -45,6 +46,24 @@ struct PullCaseResult {
   Eigen::Vector3d ball_start_R = Eigen::Vector3d::Zero();  // ground truth, before the pull [m]
   Eigen::Vector3d ball_end_R = Eigen::Vector3d::Zero();    // after the pull and settle_after_s [m]
   double displacement_m = 0.0;       // ball motion along the horizontal direction toward the robot's axis [m]
+  /// After the grasp's lift: distance of the effector centre (ground truth) from where the assumed
+  /// in-hand pose puts it [m], and the rotation between the two [deg] (the tool pivots in the
+  /// grip as it leaves the rack). NaN when not grasped.
+  double lift_slip_m = std::nan("");
+  double lift_pivot_deg = std::nan("");
+  /// At the start of the drag (NaN when the arm never got there): distance of the effector centre
+  /// (ground truth) from where the plan put it, and from where the encoders' palm pose and the
+  /// assumed in-hand pose put it (the tool moved in the hand) [m].
+  double start_effector_error_m = std::nan("");
+  double start_slip_m = std::nan("");
+  /// How far the ball moved (ground truth) while the tool was grasped, and between the grasp and
+  /// the start of the drag (NaN when not reached): the arm or tool hit it [m].
+  double ball_moved_by_grasp_m = std::nan("");
+  double ball_moved_before_drag_m = std::nan("");
+  /// The tool in the hand as the grasp left it (planned): unit direction from the palm origin to
+  /// the effector centre, and the effector's working direction (+x_T), both in the palm frame P.
+  Eigen::Vector3d in_hand_effector_dir_P = Eigen::Vector3d::Zero();
+  Eigen::Vector3d in_hand_working_dir_P = Eigen::Vector3d::Zero();
   bool ball_in_reach_before = false; // BallInReach at the start (should be false: the ball is out of reach)
   bool ball_in_reach = false;        // BallInReach after the pull: the pull succeeded
   bool put_down = false;             // PutDown placed the tool

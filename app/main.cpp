@@ -161,8 +161,8 @@ int main(int argc, char** argv) {
   render
       ->add_option("--camera", camera,
                    "helmet (the robot's RGB-D sensor) or overview (a fixed third-person view "
-                   "for looking at the scene)")
-      ->check(CLI::IsMember({"helmet", "overview"}))
+                   "for looking at the scene) or side (from the robot's left, across the table)")
+      ->check(CLI::IsMember({"helmet", "overview", "side"}))
       ->capture_default_str();
 
   app::SceneRequest perceive_request;

@@ -1,6 +1,7 @@
 #include "app/overview.h"
 
 #include <stdexcept>
+#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -11,15 +12,21 @@ namespace toolbench::app {
 
 void WriteOverviewPng(sim::World& world, const std::filesystem::path& png) {
   sim::GlContext gl;
-  sim::RendererOptions options;
-  options.camera = "overview";
-  options.noise.enabled = false;
-  sim::Renderer renderer(gl, world, options);
-  const RgbdFrame frame = renderer.Render(world, 0);
-  cv::Mat bgr;
-  cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
+  std::vector<cv::Mat> views;
+  for (const char* camera : {"overview", "side"}) {
+    sim::RendererOptions options;
+    options.camera = camera;
+    options.noise.enabled = false;
+    sim::Renderer renderer(gl, world, options);
+    const RgbdFrame frame = renderer.Render(world, 0);
+    cv::Mat bgr;
+    cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
+    views.push_back(bgr);
+  }
+  cv::Mat both;
+  cv::hconcat(views, both);
   if (png.has_parent_path()) std::filesystem::create_directories(png.parent_path());
-  if (!cv::imwrite(png.string(), bgr)) throw std::runtime_error("cannot write " + png.string());
+  if (!cv::imwrite(png.string(), both)) throw std::runtime_error("cannot write " + png.string());
 }
 
 }  // namespace toolbench::app

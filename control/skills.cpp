@@ -527,6 +527,42 @@ std::vector<Eigen::VectorXd> LineWaypoints(CartesianSolver& solver, const Eigen:
   return path;
 }
 
+// Largest joint difference between two postures [rad].
+double JointStep(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
+
+// IK of the pose at fraction t of the way from `from` to `to` (position on the line, orientation
+// slerped).
+Eigen::Isometry3d Interpolate(const Eigen::Isometry3d& from, const Eigen::Isometry3d& to, double t) {
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  X.linear() = Eigen::Quaterniond(from.linear()).slerp(t, Eigen::Quaterniond(to.linear())).toRotationMatrix();
+  X.translation() = from.translation() + t * (to.translation() - from.translation());
+  return X;
+}
+
+// Appends to *path the IK postures of a Cartesian path from `from` (posture q) to `to` over the
+// fraction interval (t0, t1], n waypoints, each warm-started from the previous one. A waypoint more
+// than max_step [rad] (any joint) from its predecessor is approached through the midpoint, up to
+// `depth` halvings. Every posture must pass `ok`. False (path unchanged past the failure point
+// left as is) when a waypoint does not converge, stays discontinuous or fails `ok`.
+bool CartesianPath(CartesianSolver& solver, const Eigen::Isometry3d& from, const Eigen::Isometry3d& to, double t0,
+                   double t1, int n, double max_step, int depth, const std::function<bool(const Eigen::VectorXd&)>& ok,
+                   Eigen::VectorXd* q, std::vector<Eigen::VectorXd>* path) {
+  for (int i = 1; i <= n; ++i) {
+    const double t = t0 + (t1 - t0) * i / n;
+    const IkResult r = solver.Solve(Interpolate(from, to, t), *q);
+    if (Converged(r) && JointStep(r.q, *q) <= max_step) {
+      if (!ok(r.q)) return false;
+      *q = r.q;
+      path->push_back(r.q);
+      continue;
+    }
+    if (depth <= 0) return false;
+    const double t_prev = t0 + (t1 - t0) * (i - 1) / n;
+    if (!CartesianPath(solver, from, to, t_prev, t, 2, max_step, depth - 1, ok, q, path)) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 void PullOptions::Validate() const {
@@ -556,6 +592,12 @@ void PullOptions::Validate() const {
   if (descend_waypoints < 1) fail("descend_waypoints", descend_waypoints, ">= 1");
   if (!(clear_back_m >= 0)) fail("clear_back_m", clear_back_m, ">= 0");
   if (!(clear_up_m >= 0)) fail("clear_up_m", clear_up_m, ">= 0");
+  if (!(carry_up_m >= 0)) fail("carry_up_m", carry_up_m, ">= 0");
+  if (!(carry_back_m >= 0)) fail("carry_back_m", carry_back_m, ">= 0");
+  if (transfer_waypoints < 2) fail("transfer_waypoints", transfer_waypoints, ">= 2");
+  if (!(object_clearance_m >= 0)) fail("object_clearance_m", object_clearance_m, ">= 0");
+  if (!(left_arm_object_radius_m >= 0)) fail("left_arm_object_radius_m", left_arm_object_radius_m, ">= 0");
+  if (!(max_joint_step_rad > 0)) fail("max_joint_step_rad", max_joint_step_rad, "> 0");
   if (!(max_pull_turn_rad >= 0 && max_pull_turn_rad <= M_PI / 2)) fail("max_pull_turn_rad", max_pull_turn_rad, "in [0, pi/2]");
   if (!(pull_turn_step_rad > 0)) fail("pull_turn_step_rad", pull_turn_step_rad, "> 0");
   if (drag_waypoints < 2) fail("drag_waypoints", drag_waypoints, ">= 2");
@@ -578,6 +620,16 @@ const char* ToString(PullStatus status) {
     case PullStatus::kLostTool: return "lost_tool";
   }
   return "unknown";
+}
+
+Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector) {
+  if (!X_RH.matrix().allFinite() || !p_R_effector.allFinite()) {
+    ThrowInvalid("HandleTowardEffector: X_RH or p_R_effector = (", p_R_effector.transpose(), ") is not finite");
+  }
+  if ((p_R_effector - X_RH.translation()).dot(X_RH.linear().col(2)) >= 0) return X_RH;
+  Eigen::Isometry3d X = X_RH;
+  X.linear() = X_RH.linear() * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  return X;
 }
 
 const char* ToString(ToolAction action) {
@@ -685,13 +737,133 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   auto path_clear = [&](const std::vector<Eigen::VectorXd>& path) {
     return std::all_of(path.begin(), path.end(), left_arm_clear);
   };
+  // The transfer's checks: the fixed left arm stays above the object when near it, the tool above
+  // the support and clear of the object (a subsample of its points keeps this cheap).
+  Eigen::Matrix3Xd tool_sample;
+  if (geometric) {
+    const Eigen::Index stride = std::max<Eigen::Index>(1, effector.tool_points_T.cols() / 300);
+    tool_sample.resize(3, (effector.tool_points_T.cols() + stride - 1) / stride);
+    for (Eigen::Index i = 0, j = 0; i < effector.tool_points_T.cols(); i += stride, ++j) {
+      tool_sample.col(j) = effector.tool_points_T.col(i);
+    }
+  }
+  std::string transfer_failure;
+  auto transfer_clear = [&](const Eigen::VectorXd& q) {
+    for (size_t i = 0; i < left_arm.size(); ++i) {
+      const Eigen::Vector3d p = left_arm[i].TipPose(q).translation();
+      if (Eigen::Vector2d(p.x() - p_RO.x(), p.y() - p_RO.y()).norm() < options.left_arm_object_radius_m &&
+          p.z() < p_RO.z() + object_radius + options.left_arm_clearance_m) {
+        transfer_failure = Cat("the left arm (", options.left_arm_links[i], ") would pass over the object");
+        return false;
+      }
+    }
+    if (!geometric) return true;
+    const Eigen::Matrix3Xd tool = (chain.TipPose(q) * X_PT) * tool_sample;
+    const double r_min = object_radius + options.object_clearance_m;
+    for (Eigen::Index i = 0; i < tool.cols(); ++i) {
+      if (tool(2, i) < support_z) {
+        transfer_failure = "the tool would go below the object's support";
+        return false;
+      }
+      if ((tool.col(i) - p_RO).squaredNorm() < r_min * r_min) {
+        transfer_failure = "the tool would hit the object";
+        return false;
+      }
+    }
+    return true;
+  };
+  // Joint-space straight line from a to b (not including a), in steps of at most
+  // max_joint_step_rad, each posture checked by transfer_clear; false when one fails.
+  auto connect = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, std::vector<Eigen::VectorXd>* path) {
+    const int n = std::max(1, static_cast<int>(std::ceil(JointStep(a, b) / options.max_joint_step_rad)));
+    for (int i = 1; i <= n; ++i) {
+      const Eigen::VectorXd q = a + (static_cast<double>(i) / n) * (b - a);
+      if (!transfer_clear(q)) return false;
+      path->push_back(q);
+    }
+    return true;
+  };
+  // Transfer from q_now to q_above (see PullOptions::carry_up_m); false with transfer_failure.
+  auto plan_transfer = [&](const Eigen::VectorXd& q_to, std::vector<Eigen::VectorXd>* path) {
+    constexpr int kDepth = 3;
+    path->clear();
+    const Eigen::Isometry3d X_now = chain.TipPose(q_now);
+    Eigen::Vector3d back(-X_now.translation().x(), -X_now.translation().y(), 0.0);
+    back = back.norm() > 1e-6 ? back.normalized() : Eigen::Vector3d::Zero();
+    Eigen::Isometry3d X_clear = X_now;
+    X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
+    // Back and up off the rack, cut short where IK ends (the grasp may have left the arm there).
+    std::vector<Eigen::VectorXd> clear = LineWaypoints(solver, X_now, X_clear, 4, q_now);
+    for (size_t i = 0; i < clear.size(); ++i) {
+      if (JointStep(clear[i], i > 0 ? clear[i - 1] : q_now) > options.max_joint_step_rad) {
+        clear.resize(i);
+        break;
+      }
+    }
+    const Eigen::VectorXd q_clear = clear.empty() ? q_now : clear.back();
+    const Eigen::Isometry3d X_above = chain.TipPose(q_to);
+    Eigen::Vector3d toward(-X_above.translation().x(), -X_above.translation().y(), 0.0);
+    toward = toward.norm() > 1e-6 ? toward.normalized() : Eigen::Vector3d::Zero();
+    std::vector<std::string> failures;
+    for (const double f : {1.0, 0.5, 0.0}) {
+      // The via posture is solved from the descent's side, so that it lies in the descent's IK
+      // branch; the tool turns on the joint-space line to it, high above the table, where
+      // transfer_clear checks it at every step.
+      std::vector<Eigen::VectorXd> legs = clear;
+      Eigen::VectorXd q_via = q_to;
+      Eigen::Isometry3d X_via = X_above;
+      if (f > 0) {
+        X_via.translation() += f * (options.carry_up_m * up + options.carry_back_m * toward);
+        const IkResult via = solver.Solve(X_via, q_to);
+        if (!Converged(via)) {
+          failures.push_back(Cat("via point ", f, ": IK ", ToString(via.status)));
+          continue;
+        }
+        q_via = via.q;
+      }
+      // Turning the tool on a Cartesian path first (the hand on a line, orientation slerped), then
+      // on a joint-space line (the hand swings more, but plans where the wrist limits cut the
+      // Cartesian path).
+      transfer_failure.clear();
+      Eigen::VectorXd q_turn = q_clear;
+      const size_t kept = legs.size();
+      const bool cartesian = CartesianPath(solver, chain.TipPose(q_clear), X_via, 0.0, 1.0,
+                                           options.transfer_waypoints, options.max_joint_step_rad, kDepth,
+                                           transfer_clear, &q_turn, &legs) &&
+                             JointStep(q_turn, q_via) <= options.max_joint_step_rad;
+      if (cartesian) {
+        legs.push_back(q_via);  // within max_joint_step_rad of the path's end
+      } else {
+        legs.resize(kept);
+        transfer_failure.clear();
+        if (!connect(q_clear, q_via, &legs)) {
+          failures.push_back(Cat("turning the tool to via point ", f, ": ", transfer_failure));
+          continue;
+        }
+      }
+      Eigen::VectorXd q = q_via;
+      if (f > 0 && (!CartesianPath(solver, X_via, X_above, 0.0, 1.0, 3, options.max_joint_step_rad, kDepth,
+                                   transfer_clear, &q, &legs) ||
+                    JointStep(q, q_to) > options.max_joint_step_rad)) {
+        failures.push_back(Cat("down from via point ", f, ": ",
+                               transfer_failure.empty() ? "IK or another IK branch" : transfer_failure));
+        continue;
+      }
+      legs.push_back(q_to);
+      *path = std::move(legs);
+      return true;
+    }
+    transfer_failure.clear();
+    for (const std::string& f : failures) transfer_failure += (transfer_failure.empty() ? "" : "; ") + f;
+    return false;
+  };
   std::vector<double> turns{0.0};
   for (double t = options.pull_turn_step_rad; t <= options.max_pull_turn_rad + 1e-9; t += options.pull_turn_step_rad) {
     turns.push_back(-t);  // -: toward the right shoulder (+y_R) for an object in front
     turns.push_back(t);
   }
   Eigen::VectorXd q_above;
-  std::vector<Eigen::VectorXd> descend, drag, lift;
+  std::vector<Eigen::VectorXd> transfer, descend, drag, lift;
   std::string last_failure;
   double best_error = std::numeric_limits<double>::infinity();
   bool any_feasible = false;
@@ -866,6 +1038,11 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     Eigen::Isometry3d X_RP_up = X_RP_last;
     X_RP_up.translation() += options.approach_height_m * up;
     lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back());  // optional
+    transfer_failure.clear();
+    if (!plan_transfer(above.q, &transfer)) {
+      last_failure = Cat("transfer: ", transfer_failure);
+      continue;
+    }
     q_above = above.q;
     result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
     chosen = &c;
@@ -899,6 +1076,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   }
   result.status = PullStatus::kPulled;
   plan.q_above = std::move(q_above);
+  plan.transfer = std::move(transfer);
   plan.descend = std::move(descend);
   plan.drag = std::move(drag);
   plan.lift = std::move(lift);
@@ -917,45 +1095,16 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   if (!plan.complete()) return result;
   const Eigen::VectorXd& q_above = plan.q_above;
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
-  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
-  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
 
   const double t0 = robot.Time();
-  {
-    const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
-    Eigen::Vector3d back(-X_RP_now.translation().x(), -X_RP_now.translation().y(), 0.0);
-    back = back.norm() > 1e-6 ? back.normalized() : Eigen::Vector3d::Zero();
-    Eigen::Isometry3d X_clear = X_RP_now;
-    X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
-    const std::vector<Eigen::VectorXd> clear = LineWaypoints(solver, X_RP_now, X_clear, 4, q_now);
-    FollowWaypoints(robot, chain, clear, options.waypoint);
-    // Then a Cartesian path (position on a line, orientation slerped) to above the start, so the
-    // tool does not swing through the rack or the table as a joint-space move may; the joint-space
-    // move below finishes it (or does all of it when a waypoint does not converge).
-    Eigen::VectorXd q = clear.empty() ? q_now : clear.back();
-    const Eigen::Isometry3d X_from = chain.TipPose(q);
-    const Eigen::Isometry3d X_to = chain.TipPose(q_above);
-    const Eigen::Quaterniond r_from(X_from.linear()), r_to(X_to.linear());
-    std::vector<Eigen::VectorXd> path;
-    constexpr int kTransferWaypoints = 8;
-    for (int i = 1; i <= kTransferWaypoints; ++i) {
-      const double t = static_cast<double>(i) / kTransferWaypoints;
-      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-      X.linear() = r_from.slerp(t, r_to).toRotationMatrix();
-      X.translation() = X_from.translation() + t * (X_to.translation() - X_from.translation());
-      const IkResult r = solver.Solve(X, q);
-      if (!Converged(r)) {
-        path.clear();
-        break;
-      }
-      q = r.q;
-      path.push_back(q);
-    }
-    MotionOptions step = options.waypoint;
-    step.duration = options.transfer.duration / kTransferWaypoints * 1.5;
-    FollowWaypoints(robot, chain, path, step);
-  }
-  MoveJoints(robot, ChainGoal(chain, q_above), options.transfer);
+  // The transfer's waypoints are close together (PullOptions::max_joint_step_rad): each takes a
+  // share of the transfer time.
+  MotionOptions step = options.waypoint;
+  step.duration = std::max(options.waypoint.duration,
+                           options.transfer.duration / std::max<size_t>(1, plan.transfer.size()));
+  for (const Eigen::VectorXd& q : plan.transfer) { MoveJoints(robot, ChainGoal(chain, q), step); if (options.on_stage) options.on_stage("transfer"); }
+  MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);
+  if (options.on_stage) options.on_stage("above_start");
   std::string worst;
   const double arm_error = ChainError(robot, chain, q_above, &worst);
   if (arm_error > options.arm_arrival_tol) {
@@ -965,8 +1114,11 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
     return result;
   }
   FollowWaypoints(robot, chain, plan.descend, options.waypoint);
+  if (options.on_stage) options.on_stage("at_start");
   FollowWaypoints(robot, chain, plan.drag, options.waypoint);
+  if (options.on_stage) options.on_stage("dragged");
   FollowWaypoints(robot, chain, plan.lift, options.waypoint);
+  if (options.on_stage) options.on_stage("lifted");
   result.motion_s = robot.Time() - t0;
   const double gap = FingerGap(robot, desc);
   if (gap < options.empty_hand_tol) {

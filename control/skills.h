@@ -166,6 +166,14 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
                         const GraspOptions& options = {});
 
 
+/// The handle frame X_RH (z along the handle axis, either sign) turned by pi about x_H when needed
+/// so that z_H points toward p_R_effector (the tool's effector centre, in R). With it, a grasp
+/// with GraspOptions::axis_direction = +1 puts the effector on the +y_P side of the hand, where the
+/// wrist can point the tool forward and down for a tool action (pull-gt: 5 of 5 tools grasped that
+/// way pulled the ball into reach, 1 of 26 grasped the other way round). Throws
+/// std::invalid_argument for a non-finite input.
+Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector);
+
 /// What a tool action does to an object lying on the table (the thesis's pull, and the drag and
 /// push actions of the tool-affordances experiments).
 enum class ToolAction {
@@ -259,6 +267,24 @@ struct PullOptions {
   /// place it was taken from (the rack) before it swings [m], >= 0; cut short where IK ends.
   double clear_back_m = 0.15;
   double clear_up_m = 0.05;
+  /// From there the hand goes to a via point carry_up_m [m] above and carry_back_m [m] back
+  /// toward the robot from the pose above the start, turning the tool to its working orientation
+  /// on the way (position on a line, orientation slerped, transfer_waypoints IK waypoints, >= 2),
+  /// then straight down to above the start (no turning near the table). Every transfer waypoint
+  /// must keep each tool point (ToolEffector::tool_points_T, when given) above the object's
+  /// support and object_clearance_m [m] away from the object, and the fixed left arm's links
+  /// left_arm_clearance_m above the object's top when within left_arm_object_radius_m [m] of it
+  /// horizontally (a turning torso sweeps the left arm across the table). Consecutive postures may
+  /// differ by at most max_joint_step_rad [rad] in every joint (more means IK changed branch and
+  /// the arm would swing between them); a larger step is halved up to three times. Lower via
+  /// points (half, then none) are tried when a path does not plan. All >= 0 except
+  /// max_joint_step_rad > 0.
+  double carry_up_m = 0.12;
+  double carry_back_m = 0.08;
+  int transfer_waypoints = 10;
+  double object_clearance_m = 0.03;
+  double left_arm_object_radius_m = 0.15;
+  double max_joint_step_rad = 0.3;
   /// The drag direction may turn about z_R away from the action's direction (ActionDirection) by
   /// up to this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first
   /// that plans wins, straight first; for a pull, the start then lies nearer a shoulder).
@@ -267,7 +293,7 @@ struct PullOptions {
   int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
   int drag_waypoints = 10;    // IK waypoints of the drag, >= 2
   int lift_waypoints = 2;     // IK waypoints of the lift after the drag, >= 1
-  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 0.5};  // current posture -> above the start
+  MotionOptions transfer{3.0, 0.01, 0.02, 0.05, 0.5};  // the transfer to above the start: duration shared by its waypoints
   MotionOptions waypoint{0.3, 0.01, 0.02, 0.05, 0.1};  // each descent / drag / lift waypoint
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
   double empty_hand_tol = 0.05;
@@ -275,6 +301,10 @@ struct PullOptions {
   IkOptions ik;                   // waypoint solves
   int screening_restarts = 3;     // cheap IK for sampled orientations: restarts, >= 0
   int screening_ipopt_iterations = 10;  // and Ipopt iterations, > 0
+  /// Called, when set, after each stage that moved the robot, with the stage's name:
+  /// "above_start" (transfer done), "at_start" (descent done),
+  /// "dragged", "lifted". For observers; must not move the robot.
+  std::function<void(const char* stage)> on_stage;
   void Validate() const;  // throws std::invalid_argument naming the field and its value
 };
 
@@ -315,7 +345,10 @@ struct PullResult {
 /// else kUnreachable or kIkFailed with the reason; the postures are then empty.
 struct PullPlan {
   PullResult result;
-  Eigen::VectorXd q_above;                // above the start (the joint-space transfer ends here)
+  /// Cartesian transfer from q_model: back and up off the rack, to the via point turning the tool,
+  /// down to above the start (PullOptions::carry_up_m); the last posture is q_above.
+  std::vector<Eigen::VectorXd> transfer;
+  Eigen::VectorXd q_above;                // above the start (the transfer ends here)
   std::vector<Eigen::VectorXd> descend;   // straight descent to the start (last = the start)
   std::vector<Eigen::VectorXd> drag;      // the drag along result.pull_dir_R
   std::vector<Eigen::VectorXd> lift;      // the lift after the drag (may be shorter than asked)
@@ -347,8 +380,12 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
 ///     screens each with a cheap IK of the palm pose X_RP = X_RT * X_PT^-1, then plans, lowest
 ///     rest cost first: above the start (approach_height_m up), straight descent, straight drag
 ///     of pull_length_m along u (cut short where IK ends, not below min_pull_fraction), lift;
-///  3. moves there (joint space to above the start, then the waypoints) keeping the hand closed,
-///     and checks from the finger encoders that the tool is still in the hand.
+///     The planned path includes the transfer from the current posture (PullPlan::transfer: back
+///     and up off the rack, the tool turned high above the table, straight down to above the
+///     start; continuity and clearance rules at PullOptions::carry_up_m); an orientation whose
+///     transfer does not plan is skipped;
+///  3. moves along it keeping the hand closed, and checks from the finger encoders that the tool
+///     is still in the hand.
 /// `X_PT` is the tool in the palm frame as the grasp left it (handle pose times the planned palm
 /// pose: GraspResult::X_RP_grasp.inverse() * X_RH * X_TH.inverse()); `p_RO` the object centre in R.
 /// Never throws for an unreachable object (a status). Throws std::invalid_argument for bad

@@ -448,6 +448,12 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
     // MuJoCo cameras look along -z with +y up: the OpenCV frame turned 180 deg about x.
     w.Line(2, "<camera name=\"overview\" pos=\"" + Vec(X_WO.translation()) + "\" xyaxes=\"" +
                   Vec(X_WO.linear().col(0)) + " " + Vec(-X_WO.linear().col(1)) + "\" fovy=\"50\"/>");
+    // A side camera on the robot's left, looking across the table at the ball and the working
+    // tool (pictures of the tool actions).
+    const Eigen::Isometry3d X_WS =
+        scene.X_WR * LookAtFrame(Eigen::Vector3d(-0.40, -1.25, 0.05), Eigen::Vector3d(-0.40, 0.0, -0.10));
+    w.Line(2, "<camera name=\"side\" pos=\"" + Vec(X_WS.translation()) + "\" xyaxes=\"" +
+                  Vec(X_WS.linear().col(0)) + " " + Vec(-X_WS.linear().col(1)) + "\" fovy=\"50\"/>");
   }
 
   // Table: top and four legs, placed in R.

@@ -1,6 +1,7 @@
 // Tool actions (pull, drag-left, drag-right, push): names, directions, and the planned start and
 // drag of each action with a stick-like tool (PlanPull, no simulator).
 #include <algorithm>
+#include <cmath>
 #include <string>
 
 #include <gmock/gmock.h>
@@ -112,6 +113,34 @@ TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
   EXPECT_GT(moved.dot(dir), options.min_pull_fraction * options.pull_length_m - 0.01) << moved.transpose();
   EXPECT_GT(moved.normalized().dot(dir), 0.98) << moved.transpose();
   EXPECT_NEAR(plan.result.planned_drag_m, options.pull_length_m * plan.drag.size() / options.drag_waypoints, 1e-9);
+
+  // The transfer from the current posture ends above the start, with no joint jumping more than
+  // max_joint_step_rad between postures (IK staying on one branch).
+  ASSERT_FALSE(plan.transfer.empty());
+  EXPECT_TRUE(plan.transfer.back().isApprox(plan.q_above, 1e-12));
+  Eigen::VectorXd previous = desc.HomeQ();
+  for (size_t i = 0; i < plan.transfer.size(); ++i) {
+    EXPECT_LE((plan.transfer[i] - previous).cwiseAbs().maxCoeff(), options.max_joint_step_rad + 1e-9)
+        << "transfer posture " << i << " of " << plan.transfer.size();
+    previous = plan.transfer[i];
+  }
+}
+
+TEST(HandleTowardEffectorTest, TurnsTheHandleAxisTowardTheEffector) {
+  Eigen::Isometry3d X_RH = Eigen::Isometry3d::Identity();
+  X_RH.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  X_RH.translation() = Eigen::Vector3d(-0.3, 0.4, 0.1);
+  const Eigen::Vector3d axis = X_RH.linear().col(2);
+  // Already toward it: unchanged.
+  EXPECT_TRUE(HandleTowardEffector(X_RH, X_RH.translation() + 0.2 * axis).isApprox(X_RH));
+  // Behind it: z_H (and y_H) reversed, x_H and the origin kept, still a rotation.
+  const Eigen::Isometry3d X = HandleTowardEffector(X_RH, X_RH.translation() - 0.2 * axis);
+  EXPECT_TRUE(X.linear().col(2).isApprox(-axis));
+  EXPECT_TRUE(X.linear().col(0).isApprox(X_RH.linear().col(0)));
+  EXPECT_TRUE(X.translation().isApprox(X_RH.translation()));
+  EXPECT_NEAR(X.linear().determinant(), 1.0, 1e-12);
+  EXPECT_THAT([&] { HandleTowardEffector(X_RH, Eigen::Vector3d::Constant(std::nan(""))); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("not finite")));
 }
 
 INSTANTIATE_TEST_SUITE_P(Actions, ToolActionPlanTest, ::testing::ValuesIn(kActions),
