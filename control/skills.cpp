@@ -1102,7 +1102,7 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   MotionOptions step = options.waypoint;
   step.duration = std::max(options.waypoint.duration,
                            options.transfer.duration / std::max<size_t>(1, plan.transfer.size()));
-  for (const Eigen::VectorXd& q : plan.transfer) { MoveJoints(robot, ChainGoal(chain, q), step); if (options.on_stage) options.on_stage("transfer"); }
+  FollowWaypoints(robot, chain, plan.transfer, step);
   MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);
   if (options.on_stage) options.on_stage("above_start");
   std::string worst;
