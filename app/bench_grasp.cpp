@@ -110,7 +110,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
   control::GraspOptions grasp_options = options.grasp;
   if (options.slide_along_handle) {
     grasp_options.handle_slide_m =
-        std::max(0.0, (model->handle.length - scene.robot.grasp.length) / 2 - options.slide_margin_m);
+        FreeHandleSlide(scene.robot, model->handle.length, options.slide_margin_m);
   }
   if (!frame_png.empty()) {
     // One picture per stage beside the final one: <stem>_<stage>.png.

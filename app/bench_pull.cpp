@@ -134,6 +134,11 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
     return out;
   };
   sim::SimRobot robot(world);
+  // The palm where the encoders put it (forward kinematics), as the robot knows it.
+  auto palm_from_encoders = [&] {
+    return robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
+                           scene.robot.palm_frame);
+  };
   const Eigen::Isometry3d X_WT_rest = world.ground_truth().Pose(body);
   const Eigen::Isometry3d X_TH = HandleFrame(model->handle);
   const Eigen::Isometry3d X_RH = X_RW * X_WT_rest * X_TH;
@@ -147,7 +152,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   // tool then reaches further): 60 % of the way to the end, else 30 %, else the centre; with the
   // effector on the +y_P side of the hand first (HandleTowardEffector), else either way round.
   // A grasp that found no plan has not moved the robot, so the next one can be tried.
-  const double free_slide = std::max(0.0, (model->handle.length - scene.robot.grasp.length) / 2 - 0.01);
+  const double free_slide = FreeHandleSlide(scene.robot, model->handle.length);
   const Eigen::Vector3d p_R_effector = X_RW * X_WT_rest * model->effector.center;
   const Eigen::Isometry3d X_RH_toward = control::HandleTowardEffector(X_RH, p_R_effector);
   bool planned = false;
@@ -180,11 +185,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   out.in_hand_working_dir_P = X_PT.linear() * Eigen::Vector3d::UnitX();
   {
     // How the tool sits in the hand after the lift (ground truth) against what the robot assumes.
-    const Eigen::Isometry3d X_PT_truth =
-        robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
-                        scene.robot.palm_frame)
-            .inverse() *
-        X_RW * world.ground_truth().Pose(body);
+    const Eigen::Isometry3d X_PT_truth = palm_from_encoders().inverse() * X_RW * world.ground_truth().Pose(body);
     out.lift_slip_m = (X_PT_truth * model->effector.center - X_PT * model->effector.center).norm();
     out.lift_pivot_deg = Eigen::AngleAxisd(X_PT_truth.linear() * X_PT.linear().transpose()).angle() * 180 / M_PI;
   }
@@ -201,8 +202,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
       reached_start = true;
       out.ball_moved_before_drag_m = (ball_R() - out.ball_start_R).norm();
       X_RT_at_start = X_RW * world.ground_truth().Pose(body);
-      X_RP_at_start = robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
-                                      scene.robot.palm_frame);
+      X_RP_at_start = palm_from_encoders();
     }
     if (!frames_dir.empty()) frame("2" + std::string(1, static_cast<char>('a' + stage_index++)) + "_pull_" + stage);
   };

@@ -417,7 +417,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // does: at the centre only, most handles on the rack were out of reach (8 random
       // episodes: 2 grasps without the slide, 6 with it).
       control::GraspOptions grasp_options;
-      grasp_options.handle_slide_m = std::max(0.0, (tool.handle.length - desc.grasp.length) / 2 - 0.01);
+      grasp_options.handle_slide_m = FreeHandleSlide(desc, tool.handle.length);
       const control::GraspResult g = control::GraspHandle(robot, desc, tool.handle.X_FH, grasp_options);
       s.outcome = control::ToString(g.status);
       s.reason = g.reason;

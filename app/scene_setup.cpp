@@ -127,6 +127,10 @@ Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc) {
   return X_PG;
 }
 
+double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length, double margin) {
+  return std::max(0.0, (handle_length - desc.grasp.length) / 2 - margin);
+}
+
 control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
   control::ToolEffector e;
   e.center_T = model.effector.center;

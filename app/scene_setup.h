@@ -77,6 +77,11 @@ control::ToolEffector EffectorOf(const toollib::ToolModel& model);
 /// A handle held in the hand has its frame H on G up to a roll about z_G.
 Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc);
 
+/// How far the hand's grasp cylinder can slide from the centre of a handle of length
+/// `handle_length` [m] either way and stay `margin` [m] inside its ends: (handle_length - grasp
+/// length) / 2 - margin, at least 0 (GraspOptions::handle_slide_m).
+double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length, double margin = 0.01);
+
 /// Handle frame H of a tool's handle segment, in T: origin at the handle centre, z_H along the
 /// handle axis (the grasp skills' convention; the rotation about z_H is the shortest turn from z_T).
 Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);

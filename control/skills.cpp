@@ -530,7 +530,7 @@ std::vector<Eigen::VectorXd> LineWaypoints(CartesianSolver& solver, const Eigen:
 // Largest joint difference between two postures [rad].
 double JointStep(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
 
-// IK of the pose at fraction t of the way from `from` to `to` (position on the line, orientation
+// The pose at fraction t of the way from `from` to `to` (position on the line, orientation
 // slerped).
 Eigen::Isometry3d Interpolate(const Eigen::Isometry3d& from, const Eigen::Isometry3d& to, double t) {
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
@@ -542,8 +542,8 @@ Eigen::Isometry3d Interpolate(const Eigen::Isometry3d& from, const Eigen::Isomet
 // Appends to *path the IK postures of a Cartesian path from `from` (posture q) to `to` over the
 // fraction interval (t0, t1], n waypoints, each warm-started from the previous one. A waypoint more
 // than max_step [rad] (any joint) from its predecessor is approached through the midpoint, up to
-// `depth` halvings. Every posture must pass `ok`. False (path unchanged past the failure point
-// left as is) when a waypoint does not converge, stays discontinuous or fails `ok`.
+// `depth` halvings. Every posture must pass `ok`. False when a waypoint does not converge, stays
+// discontinuous or fails `ok` (*path then holds the postures before it).
 bool CartesianPath(CartesianSolver& solver, const Eigen::Isometry3d& from, const Eigen::Isometry3d& to, double t0,
                    double t1, int n, double max_step, int depth, const std::function<bool(const Eigen::VectorXd&)>& ok,
                    Eigen::VectorXd* q, std::vector<Eigen::VectorXd>* path) {
