@@ -28,6 +28,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     EpisodeRequest episode;
     episode.scene.seed = c.params["scene_seed"].get<std::uint64_t>();
     episode.quiet = true;
+    episode.frames = request.frames;
     episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
     return EpisodeJson(RunEpisode(episode));
   };

@@ -12,11 +12,13 @@
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
+#include "app/held_tool_view.h"
 #include "app/overview.h"
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
 #include "robot/robot_model.h"
+#include "sim/renderer.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
 
@@ -148,27 +150,11 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   out.ball_in_reach_before =
       control::BallInReach(scene.robot, scene.robot.HomeQ(), out.ball_start_R, radius, options.ball_grasp);
 
-  // 1. Grasp from the ground-truth handle, choked toward the end away from the effector (the
-  // tool then reaches further): 60 % of the way to the end, else 30 %, else the centre; with the
-  // effector on the +y_P side of the hand first (HandleTowardEffector), else either way round.
-  // A grasp that found no plan has not moved the robot, so the next one can be tried.
-  const double free_slide = FreeHandleSlide(scene.robot, model->handle.length);
+  // 1. Grasp from the ground-truth handle as the episode grasps from the perceived one
+  // (GraspToolForAction: choked away from the effector, the effector on the +y_P side first).
   const Eigen::Vector3d p_R_effector = X_RW * X_WT_rest * model->effector.center;
-  const Eigen::Isometry3d X_RH_toward = control::HandleTowardEffector(X_RH, p_R_effector);
-  bool planned = false;
-  for (const int direction : {1, 0}) {
-    for (const double choke : {0.6, 0.3, 0.0}) {
-      Eigen::Isometry3d X_RH_grasped = X_RH_toward;
-      X_RH_grasped.translation() -= choke * free_slide * X_RH_toward.linear().col(2);
-      control::GraspOptions grasp_options = options.grasp;
-      grasp_options.axis_direction = direction;
-      out.grasp = control::GraspHandle(robot, scene.robot, X_RH_grasped, grasp_options);
-      planned = out.grasp.status != control::GraspStatus::kUnreachable &&
-                out.grasp.status != control::GraspStatus::kIkFailed;
-      if (planned) break;
-    }
-    if (planned) break;
-  }
+  out.grasp = control::GraspToolForAction(robot, scene.robot, X_RH, p_R_effector,
+                                          FreeHandleSlide(scene.robot, model->handle.length), options.grasp);
   frame("1_grasp");
   if (out.grasp.status != control::GraspStatus::kGrasped) {
     return finish(std::string("grasp_") + control::ToString(out.grasp.status) + ": " + out.grasp.reason);
@@ -179,7 +165,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
 
   // 2. Pull. The in-hand pose is what the robot knows: the planned palm pose at the grasp and the
   // handle pose it grasped.
-  const Eigen::Isometry3d X_PT = out.grasp.X_RP_grasp.inverse() * X_RH * X_TH.inverse();
+  Eigen::Isometry3d X_PT = out.grasp.X_RP_grasp.inverse() * X_RH * X_TH.inverse();
   out.ball_moved_by_grasp_m = (ball_R() - out.ball_start_R).norm();
   out.in_hand_effector_dir_P = (X_PT * model->effector.center).normalized();
   out.in_hand_working_dir_P = X_PT.linear() * Eigen::Vector3d::UnitX();
@@ -189,6 +175,24 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
     out.lift_slip_m = (X_PT_truth * model->effector.center - X_PT * model->effector.center).norm();
     out.lift_pivot_deg = Eigen::AngleAxisd(X_PT_truth.linear() * X_PT.linear().transpose()).angle() * 180 / M_PI;
   }
+  if (options.inspect_held_tool) {
+    // The robot's eye, as the episode has it: rendered frames, camera pose from the encoders.
+    sim::GlContext gl;
+    sim::Renderer eye(gl, world, sim::RendererOptions{});
+    auto see = [&] {
+      RgbdFrame frame = eye.Render(world, DeriveSeed(seed, "in-hand frame"));
+      frame.X_RC = CameraPoseFromEncoders(scene.robot, robot);
+      return frame;
+    };
+    const HeldToolView view = InspectHeldTool(robot, scene.robot, see, *model, X_PT);
+    X_PT = view.X_PT;
+    out.inspected = view.estimate.ok;
+    out.inspect_reason = view.estimate.reason;
+    const Eigen::Isometry3d X_PT_truth = view.X_RP.inverse() * X_RW * world.ground_truth().Pose(body);
+    out.used_pose_error_deg = Eigen::AngleAxisd(X_PT.linear() * X_PT_truth.linear().transpose()).angle() * 180 / M_PI;
+    out.used_effector_error_m = (X_PT * model->effector.center - X_PT_truth * model->effector.center).norm();
+  }
+  if (options.inspect_held_tool) frame("1b_inspected");  // its own GL context: after the eye's is gone
   out.ball_start_R = ball_R();
   control::PullOptions pull_options = options.pull;
   // Where the tool really is at the start of the drag (ground truth), against where the plan put
@@ -285,8 +289,13 @@ int RunPullBench(const BenchRequest& request) {
                           {"pull_motion_s", r.pull.motion_s},
                           {"grasp_roll_deg", r.grasp.roll_rad * 180 / M_PI},
                           {"grasp_axis_flipped", r.grasp.axis_flipped},
+                          {"grasp_slide_m", r.grasp.slide_m},
                           {"in_hand_effector_dir_P", vec(r.in_hand_effector_dir_P)},
                           {"in_hand_working_dir_P", vec(r.in_hand_working_dir_P)},
+                          {"inspected", r.inspected},
+                          {"inspect_reason", r.inspect_reason},
+                          {"used_pose_error_deg", r.used_pose_error_deg},
+                          {"used_effector_error_m", r.used_effector_error_m},
                           {"lift_slip_m", r.lift_slip_m},
                           {"lift_pivot_deg", r.lift_pivot_deg},
                           {"start_effector_error_m", r.start_effector_error_m},

@@ -29,6 +29,10 @@ struct PullCaseOptions {
   bool put_down_and_grasp_ball = true;
   Eigen::Vector2d put_down_R{-0.30, -0.30};
   double ball_lift_m = 0.03;        // [m], > 0
+  /// After the grasp, look at the tool in the hand and plan the pull with the pose seen there
+  /// (InspectHeldTool); false: with the pose the grasp planned (the tool pivots in the grip as
+  /// it leaves the rack, so that pose is 10-45 deg off: the baseline).
+  bool inspect_held_tool = true;
   control::GraspOptions grasp;      // grasp of the handle (slides along it as grasp-gt does)
   control::PullOptions pull;
   control::PutDownOptions put_down;
@@ -64,6 +68,13 @@ struct PullCaseResult {
   /// the effector centre, and the effector's working direction (+x_T), both in the palm frame P.
   Eigen::Vector3d in_hand_effector_dir_P = Eigen::Vector3d::Zero();
   Eigen::Vector3d in_hand_working_dir_P = Eigen::Vector3d::Zero();
+  /// Looking at the held tool (PullCaseOptions::inspect_held_tool): whether the estimate was used,
+  /// why not, and the error of the in-hand pose the pull planned with against the truth when the
+  /// frame was taken: rotation [deg] and effector centre [m] (NaN when not inspected).
+  bool inspected = false;
+  std::string inspect_reason;
+  double used_pose_error_deg = std::nan("");
+  double used_effector_error_m = std::nan("");
   bool ball_in_reach_before = false; // BallInReach at the start (should be false: the ball is out of reach)
   bool ball_in_reach = false;        // BallInReach after the pull: the pull succeeded
   bool put_down = false;             // PutDown placed the tool
@@ -76,10 +87,10 @@ struct PullCaseResult {
 };
 
 /// One case: `tool` alone in options.cell, the ball where the seed puts it (out of reach on the
-/// table), grasp from the ground-truth handle, PullObject with the tool's effector segment and
-/// the in-hand pose known from the grasp plan (X_PT = X_RP^-1 X_RH X_TH^-1), the ball's
-/// ground-truth position as the target (this isolates control from perception), then put-down
-/// and ball grasp. `frames_dir`, when not empty, receives overview PNGs of the stages.
+/// table), grasp from the ground-truth handle (GraspToolForAction), a look at the tool in the hand
+/// (InspectHeldTool; the prior is the grasp plan's X_PT = X_RP^-1 X_RH X_TH^-1), PullObject with
+/// the tool's effector segment, the ball's ground-truth position as the target (this isolates
+/// the pull from the rack perception), then put-down and ball grasp. `frames_dir`, when not empty, receives overview PNGs of the stages.
 /// Throws std::invalid_argument for an unknown tool or bad options; failures are results.
 PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, std::uint64_t seed,
                            const PullCaseOptions& options = {}, const std::filesystem::path& frames_dir = {});

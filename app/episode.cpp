@@ -20,6 +20,8 @@
 #include "app/affordance.h"
 #include "app/bench.h"
 #include "app/frame_io.h"
+#include "app/held_tool_view.h"
+#include "app/overview.h"
 #include "app/perceive.h"
 #include "common/check.h"
 #include "common/paths.h"
@@ -221,6 +223,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     return frame;
   };
   auto q_model = [&]() { return ModelQ(desc, robot.JointNames(), robot.ReadEncoders()); };
+  int frame_index = 0;
+  auto stage_frame = [&](const std::string& stage) {
+    if (!request.frames || request.out_dir.empty()) return;
+    WriteOverviewPng(world, request.out_dir / "frames" / fmt::format("{:02d}_{}.png", frame_index++, stage));
+  };
   const Eigen::Vector3d table_target(spec.table.center.x(), spec.table.center.y(), spec.table.top_z);
 
   // ---- Stage bookkeeping. ----
@@ -413,12 +420,15 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     bool holding = false;
     run_stage("grasp_tool", [&](StageRecord& s) {
       const double z0 = world.ground_truth().Pose(tool_body).translation().z();
-      // The hand may grasp anywhere along the perceived handle (1 cm from its ends), as grasp-gt
-      // does: at the centre only, most handles on the rack were out of reach (8 random
-      // episodes: 2 grasps without the slide, 6 with it).
+      // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
+      // on the side of the hand from which the wrist can point it forward and down; the whole
+      // perceived handle (1 cm from its ends) when none of those is reachable. The effector is
+      // where the recognised model puts it in the perceived tool pose.
+      const Eigen::Vector3d p_R_effector = tool.X_RT * model->effector.center;
       control::GraspOptions grasp_options;
-      grasp_options.handle_slide_m = FreeHandleSlide(desc, tool.handle.length);
-      const control::GraspResult g = control::GraspHandle(robot, desc, tool.handle.X_FH, grasp_options);
+      grasp_options.on_stage = [&](const char* stage) { stage_frame(std::string("grasp_") + stage); };
+      const control::GraspResult g = control::GraspToolForAction(
+          robot, desc, tool.handle.X_FH, p_R_effector, FreeHandleSlide(desc, tool.handle.length), grasp_options);
       s.outcome = control::ToString(g.status);
       s.reason = g.reason;
       if (g.status == control::GraspStatus::kGrasped) {
@@ -441,9 +451,43 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.ok = holding;
       const double z1 = world.ground_truth().Pose(tool_body).translation().z();
       result.grasp_success = holding && !result.assisted && z1 - z0 >= 0.05;
-      s.details = {{"tool_lift_m_truth", z1 - z0}, {"assisted", result.assisted}};
+      s.details = {{"tool_lift_m_truth", z1 - z0},
+                   {"assisted", result.assisted},
+                   {"slide_m", g.slide_m},
+                   {"axis_flipped", g.axis_flipped},
+                   {"roll_deg", g.roll_rad * 180 / M_PI},
+                   {"candidates", g.candidates},
+                   {"plan_ms", g.plan_ms}};
     });
     if (!holding) return finish();
+
+    // ---- 5b. Look at the tool in the hand: it may have pivoted in the grip as it came up. ----
+    run_stage("inspect_tool", [&](StageRecord& s) {
+      const Eigen::Isometry3d X_PT_plan = X_PT;
+      const HeldToolView view = InspectHeldTool(robot, desc, see, *model, X_PT);
+      const perception::HeldToolEstimate& e = view.estimate;
+      // Scoring only: how far the plan's and the used in-hand poses are from the truth.
+      const Eigen::Isometry3d X_PT_truth = view.X_RP.inverse() * X_RW * world.ground_truth().Pose(tool_body);
+      auto error_deg = [&](const Eigen::Isometry3d& X) {
+        return Eigen::AngleAxisd(X.linear() * X_PT_truth.linear().transpose()).angle() * 180 / M_PI;
+      };
+      auto effector_error_m = [&](const Eigen::Isometry3d& X) {
+        return (X * model->effector.center - X_PT_truth * model->effector.center).norm();
+      };
+      X_PT = view.X_PT;
+      s.ok = true;  // without a plausible estimate the plan's pose is kept
+      s.outcome = e.ok ? "corrected" : "kept_plan";
+      s.reason = e.reason;
+      s.details = {{"gaze_converged", view.gaze_converged}, {"segments", e.segments},
+                   {"points", e.points},      {"fit_error_m", e.fit_error_m},
+                   {"correction_deg", e.correction_deg}, {"correction_m", e.correction_m},
+                   {"axis_offset_m", e.axis_offset_m},
+                   {"plan_error_deg_truth", error_deg(X_PT_plan)},
+                   {"plan_effector_error_m_truth", effector_error_m(X_PT_plan)},
+                   {"used_error_deg_truth", error_deg(X_PT)},
+                   {"used_effector_error_m_truth", effector_error_m(X_PT)}};
+      if (!request.out_dir.empty()) cv::imwrite((request.out_dir / "in_hand.png").string(), view.picture);
+    });
     if (affordance) {
       // The same model for the tool as it is actually held.
       const Eigen::Isometry3d X_GT = PalmGraspFrame(desc).inverse() * X_PT;
@@ -456,6 +500,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     run_stage("pull", [&](StageRecord& s) {
       // The recognised library model's effector geometry (library knowledge, not ground truth).
       const control::ToolEffector effector = EffectorOf(*model);
+      pull_options.on_stage = [&](const char* stage) { stage_frame(std::string("action_") + stage); };
       const control::PullResult p =
           control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
       s.ok = p.status == control::PullStatus::kPulled;

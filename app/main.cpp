@@ -137,6 +137,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   episode->add_option("--out", episode_request.out_dir, "Output folder (default: runs/episode-seed<N>)");
   episode->add_flag("--video", episode_request.video, "Write video.mp4 from the overview camera (slower)");
+  episode->add_flag("--frames", episode_request.frames,
+                    "Write overview and side-view PNGs after each stage of the tool grasp and the action to "
+                    "--out/frames (debugging)");
   episode->add_flag("--quiet", episode_request.quiet, "No progress lines and no summary (for scripts)");
   episode->add_flag(
       "--no-noise", [&](std::int64_t) { episode_request.noise = false; },
@@ -268,8 +271,9 @@ int main(int argc, char** argv) {
         "--no-isolate", [&](std::int64_t) { bench_request.isolate = false; },
         "Run cases in this process instead of child processes (for a debugger)");
     bench->add_flag("--frames", bench_request.frames,
-                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt), or each "
-                    "episode's images to --out/episodes (table53 --episodes)");
+                    "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt), each "
+                    "episode's images to --out/episodes (table53 --episodes), or each random episode's "
+                    "grasp and action stages to --out/episodes/N/frames (random)");
   }
 
   app::ExploreRequest explore_request;

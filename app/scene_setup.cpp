@@ -119,6 +119,19 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
   return result;
 }
 
+LookResult LookWithNeck(RobotInterface& interface, const robot::RobotDescription& robot,
+                        const Eigen::Vector3d& p_R_target) {
+  LookResult result;
+  control::GazeOptions options;
+  for (auto it = options.joint_weights.begin(); it != options.joint_weights.end();) {
+    it = it->first.rfind("neck_", 0) == 0 ? std::next(it) : options.joint_weights.erase(it);
+  }
+  const Eigen::VectorXd q = ModelQ(robot, interface.JointNames(), interface.PositionTargets());
+  result.gaze = control::LookAt(robot, q, p_R_target, options);
+  result.motion = control::MoveJoints(interface, result.gaze.joints);
+  return result;
+}
+
 Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc) {
   Eigen::Isometry3d X_PG = Eigen::Isometry3d::Identity();
   X_PG.linear() =

@@ -66,6 +66,12 @@ struct LookResult {
 /// (thesis Fig. 5.4). Never throws for an unreachable gaze: the result says so.
 LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target);
 
+/// Points the head at `p_R_target` with the neck alone, from the current posture: torso and arms
+/// keep their targets (e.g. to look at a tool held in the hand, which a torso move would carry
+/// along). Never throws for an unreachable gaze: the result says so.
+LookResult LookWithNeck(RobotInterface& interface, const robot::RobotDescription& robot,
+                        const Eigen::Vector3d& p_R_target);
+
 /// The effector of a library tool as the pull skill needs it, in T: the sidecar's effector
 /// centre, working direction +x_T, its reach along +x_T from the mesh, the mesh vertices of the
 /// effector region and of the whole tool.

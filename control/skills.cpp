@@ -73,6 +73,25 @@ struct Plan {
 
 bool Converged(const IkResult& r) { return r.status == IkStatus::kConverged; }
 
+// Largest |encoder - goal| over the chain joints [rad] (the hand joints squeezing a tool never
+// "arrive", so MoveJoints' own verdict cannot be used while holding one); names the joint.
+double ChainError(const RobotInterface& robot, const KinematicChain& chain, const Eigen::VectorXd& q_model_goal,
+                  std::string* worst) {
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd enc = robot.ReadEncoders();
+  double max_error = 0.0;
+  for (int i = 0; i < chain.num_joints(); ++i) {
+    const auto it = std::find(names.begin(), names.end(), chain.joint_names()[i]);
+    if (it == names.end()) continue;
+    const double e = std::abs(enc[it - names.begin()] - q_model_goal[chain.q_indices()[i]]);
+    if (e > max_error) {
+      max_error = e;
+      *worst = chain.joint_names()[i];
+    }
+  }
+  return max_error;
+}
+
 }  // namespace
 
 void GraspOptions::Validate() const {
@@ -391,9 +410,12 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
   result.transfer_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("staged");
-  if (!transfer.reached && transfer.max_error > options.arm_arrival_tol) {
+  // The arm's arrival only: an opening finger may rest against the rack (it moves on with the hand).
+  std::string worst;
+  const double arm_error = transfer.reached ? 0.0 : ChainError(robot, chain, plan.q_pregrasp, &worst);
+  if (arm_error > options.arm_arrival_tol) {
     result.status = GraspStatus::kMotionTimeout;
-    result.reason = Cat("pre-grasp not reached: ", transfer.worst_joint, " off by ", transfer.max_error, " rad");
+    result.reason = Cat("pre-grasp not reached: ", worst, " off by ", arm_error, " rad");
     return result;
   }
 
@@ -486,24 +508,6 @@ void RequireFinite(const Eigen::Isometry3d& X, const char* function, const char*
   }
 }
 
-// Largest |encoder - goal| over the chain joints [rad] (the hand joints squeezing a tool never
-// "arrive", so MoveJoints' own verdict cannot be used while holding one); names the joint.
-double ChainError(const RobotInterface& robot, const KinematicChain& chain, const Eigen::VectorXd& q_model_goal,
-                  std::string* worst) {
-  const std::vector<std::string> names = robot.JointNames();
-  const Eigen::VectorXd enc = robot.ReadEncoders();
-  double max_error = 0.0;
-  for (int i = 0; i < chain.num_joints(); ++i) {
-    const auto it = std::find(names.begin(), names.end(), chain.joint_names()[i]);
-    if (it == names.end()) continue;
-    const double e = std::abs(enc[it - names.begin()] - q_model_goal[chain.q_indices()[i]]);
-    if (e > max_error) {
-      max_error = e;
-      *worst = chain.joint_names()[i];
-    }
-  }
-  return max_error;
-}
 
 // Follows joint-space waypoints with the hand targets untouched.
 void FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
@@ -511,24 +515,26 @@ void FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const s
   for (const Eigen::VectorXd& q : path) MoveJoints(robot, ChainGoal(chain, q), motion);
 }
 
+// Largest joint difference between two postures [rad].
+double JointStep(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
+
 // Straight-line IK waypoints from `from` to `to` (orientation of `to` throughout), warm-started
-// from q; returns the waypoints that converged, stopping at the first that does not.
+// from q; returns the waypoints that converged, stopping at the first that does not or that
+// moves a joint by more than max_step [rad] from the previous posture (IK changed branch).
 std::vector<Eigen::VectorXd> LineWaypoints(CartesianSolver& solver, const Eigen::Isometry3d& from,
-                                           const Eigen::Isometry3d& to, int n, Eigen::VectorXd q) {
+                                           const Eigen::Isometry3d& to, int n, Eigen::VectorXd q,
+                                           double max_step = std::numeric_limits<double>::infinity()) {
   std::vector<Eigen::VectorXd> path;
   for (int i = 1; i <= n; ++i) {
     Eigen::Isometry3d X = to;
     X.translation() = from.translation() + (static_cast<double>(i) / n) * (to.translation() - from.translation());
     const IkResult r = solver.Solve(X, q);
-    if (!Converged(r)) break;
+    if (!Converged(r) || JointStep(r.q, q) > max_step) break;
     q = r.q;
     path.push_back(q);
   }
   return path;
 }
-
-// Largest joint difference between two postures [rad].
-double JointStep(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
 
 // The pose at fraction t of the way from `from` to `to` (position on the line, orientation
 // slerped).
@@ -573,6 +579,7 @@ void PullOptions::Validate() const {
   if (!std::isfinite(height_offset_m)) fail("height_offset_m", height_offset_m, "finite");
   if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
   if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
+  if (!(max_complete_plans > 0)) fail("max_complete_plans", max_complete_plans, "> 0");
   if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
   if (!(support_clearance_m >= 0)) fail("support_clearance_m", support_clearance_m, ">= 0");
   if (!(start_step_m > 0)) fail("start_step_m", start_step_m, "> 0");
@@ -630,6 +637,61 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
   Eigen::Isometry3d X = X_RH;
   X.linear() = X_RH.linear() * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   return X;
+}
+
+GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
+                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector, double max_slide_m,
+                               const GraspOptions& options) {
+  if (!(max_slide_m >= 0) || !std::isfinite(max_slide_m)) {
+    ThrowInvalid("GraspToolForAction: max_slide_m = ", max_slide_m, " (expected finite, >= 0)");
+  }
+  const Eigen::Isometry3d X_RH_toward = HandleTowardEffector(X_RH, p_R_effector);
+  const Eigen::Vector3d z_H = X_RH.linear().col(2);
+  GraspResult last;
+  int candidates = 0;
+  double plan_ms = 0.0;
+  auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
+    GraspOptions o = options;
+    o.axis_direction = direction;
+    o.handle_slide_m = slide;
+    last = GraspHandle(robot, desc, X_RH_grasped, o);
+    candidates += last.candidates;
+    plan_ms += last.plan_ms;
+    last.candidates = candidates;
+    last.plan_ms = plan_ms;
+    last.slide_m = (X_RH_grasped.translation() - X_RH.translation()).dot(z_H) +
+                   last.slide_m * X_RH_grasped.linear().col(2).dot(z_H);
+    return last.status != GraspStatus::kUnreachable && last.status != GraspStatus::kIkFailed;
+  };
+  // A transfer blocked on the way (the open hand caught on a neighbouring tool or the rack: the
+  // grasp plans against the arm's reach, not against collisions) goes back to where it started
+  // and the next grasp is tried.
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd q_start = ModelQFrom(desc, names, robot.ReadEncoders());
+  int blocked = 0;
+  auto back_off = [&] {
+    ++blocked;
+    std::map<std::string, double> goal = ChainGoal(chain, q_start);
+    for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
+    MoveJoints(robot, goal, options.transfer);
+  };
+  auto done = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
+    if (!attempt(X_RH_grasped, direction, slide)) return false;
+    if (last.status != GraspStatus::kMotionTimeout) return true;
+    back_off();
+    return false;
+  };
+  for (const int direction : {1, 0}) {
+    for (const double choke : {0.6, 0.3, 0.0}) {
+      Eigen::Isometry3d X = X_RH_toward;
+      X.translation() -= choke * max_slide_m * X_RH_toward.linear().col(2);
+      if (done(X, direction, 0.0)) return last;
+    }
+  }
+  if (max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return last;
+  if (blocked > 0) last.reason += Cat(" (", blocked, " grasp transfers blocked on the way and backed off)");
+  return last;
 }
 
 const char* ToString(ToolAction action) {
@@ -793,13 +855,8 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     Eigen::Isometry3d X_clear = X_now;
     X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
     // Back and up off the rack, cut short where IK ends (the grasp may have left the arm there).
-    std::vector<Eigen::VectorXd> clear = LineWaypoints(solver, X_now, X_clear, 4, q_now);
-    for (size_t i = 0; i < clear.size(); ++i) {
-      if (JointStep(clear[i], i > 0 ? clear[i - 1] : q_now) > options.max_joint_step_rad) {
-        clear.resize(i);
-        break;
-      }
-    }
+    const std::vector<Eigen::VectorXd> clear =
+        LineWaypoints(solver, X_now, X_clear, 4, q_now, options.max_joint_step_rad);
     const Eigen::VectorXd q_clear = clear.empty() ? q_now : clear.back();
     const Eigen::Isometry3d X_above = chain.TipPose(q_to);
     Eigen::Vector3d toward(-X_above.translation().x(), -X_above.translation().y(), 0.0);
@@ -983,6 +1040,12 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
                    [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
   const int min_drag = std::max(2, static_cast<int>(std::ceil(options.min_pull_fraction * options.drag_waypoints)));
   const Candidate* chosen = nullptr;
+  // The complete plan with the longest drag so far (PullOptions::max_complete_plans).
+  struct Best {
+    Eigen::VectorXd q_above;
+    std::vector<Eigen::VectorXd> transfer, descend, drag, lift;
+  } best;
+  int complete = 0;
   for (const Candidate& c : feasible) {
     Eigen::Isometry3d X_RP_start = c.X_RT * X_TP;
     IkResult start = solver.Solve(X_RP_start, c.ik.q);
@@ -1019,7 +1082,10 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       last_failure = Cat("above-start IK: ", ToString(above.status));
       continue;
     }
-    descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
+    // Every straight line of the action is cut where IK jumps branch (a large joint step swings
+    // the arm and the tool about between two close poses: it flung a ball off the table).
+    const double jump = options.max_joint_step_rad;
+    descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q, jump);
     if (static_cast<int>(descend.size()) < options.descend_waypoints || !left_arm_clear(above.q) ||
         !path_clear(descend)) {
       last_failure = Cat("descent waypoint ", descend.size() + 1, " IK failed");
@@ -1027,7 +1093,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
     X_RP_end.translation() += options.pull_length_m * u;
-    drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
+    drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back(), jump);
     while (!drag.empty() && !left_arm_clear(drag.back())) drag.pop_back();
     if (static_cast<int>(drag.size()) < min_drag) {
       last_failure = Cat("drag IK ended after ", drag.size(), " of ", options.drag_waypoints, " waypoints");
@@ -1037,18 +1103,26 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     X_RP_last.translation() += (options.pull_length_m * drag.size() / options.drag_waypoints) * u;
     Eigen::Isometry3d X_RP_up = X_RP_last;
     X_RP_up.translation() += options.approach_height_m * up;
-    lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back());  // optional
+    lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back(), jump);  // optional
     transfer_failure.clear();
     if (!plan_transfer(above.q, &transfer)) {
       last_failure = Cat("transfer: ", transfer_failure);
       continue;
     }
-    q_above = above.q;
-    result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
-    chosen = &c;
-    break;
+    ++complete;
+    if (chosen == nullptr || drag.size() > best.drag.size()) {
+      best = {above.q, transfer, descend, drag, lift};
+      chosen = &c;
+    }
+    if (static_cast<int>(drag.size()) == options.drag_waypoints || complete >= options.max_complete_plans) break;
   }
   if (chosen != nullptr) {
+    q_above = std::move(best.q_above);
+    transfer = std::move(best.transfer);
+    descend = std::move(best.descend);
+    drag = std::move(best.drag);
+    lift = std::move(best.lift);
+    result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
     result.X_RT_start = chosen->X_RT;
     result.elevation_rad = chosen->elevation;
     result.yaw_rad = chosen->yaw;
@@ -1318,9 +1392,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
   const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
   result.transfer_s = robot.Time() - t0;
-  if (!transfer.reached && transfer.max_error > 0.08) {
+  std::string worst;
+  const double arm_error = transfer.reached ? 0.0 : ChainError(robot, chain, q_pre, &worst);
+  if (arm_error > 0.08) {
     result.status = GraspStatus::kMotionTimeout;
-    result.reason = Cat("pre-grasp not reached: ", transfer.worst_joint, " off by ", transfer.max_error, " rad");
+    result.reason = Cat("pre-grasp not reached: ", worst, " off by ", arm_error, " rad");
     return result;
   }
   t0 = robot.Time();

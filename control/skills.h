@@ -174,6 +174,23 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
 /// std::invalid_argument for a non-finite input.
 Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector);
 
+/// Grasps a tool by its handle to use it (PullObject), as pull-gt measured best: with the
+/// effector on the +y_P side of the hand (HandleTowardEffector, axis_direction +1) first, then
+/// either way round; for each, choked toward the handle's end away from the effector by 60 %,
+/// 30 % and 0 % of max_slide_m (the tool then reaches further past the hand). When none of those
+/// plans, the whole handle: GraspHandle sliding up to max_slide_m either way from the centre.
+/// A grasp that found no plan has not moved the robot, so each next one starts from the same
+/// posture; one whose transfer to the pre-grasp was blocked (kMotionTimeout: the open hand caught
+/// on a neighbouring tool, which the plan does not model) moves back to that posture first, with
+/// the hand open. Returns the first grasp that planned (its status says whether it held), else the
+/// last failure, with `candidates` and plan_ms summed over all attempts and slide_m along z of
+/// the given X_RH. `max_slide_m` >= 0 (e.g. app's FreeHandleSlide); options.handle_slide_m and
+/// options.axis_direction are overridden. Throws as GraspHandle and HandleTowardEffector do, and
+/// std::invalid_argument for a negative or non-finite max_slide_m.
+GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
+                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector, double max_slide_m,
+                               const GraspOptions& options = {});
+
 /// What a tool action does to an object lying on the table (the thesis's pull, and the drag and
 /// push actions of the tool-affordances experiments).
 enum class ToolAction {
@@ -249,6 +266,10 @@ struct PullOptions {
   /// The drag may be cut short where IK stops converging, but not below this fraction of
   /// pull_length_m, in (0, 1].
   double min_pull_fraction = 0.3;
+  /// Orientations are planned lowest rest cost first; the first complete plan with the whole
+  /// drag wins, else the one with the longest drag among the first max_complete_plans (> 0)
+  /// complete plans (the first one only: 1).
+  int max_complete_plans = 4;
   double approach_height_m = 0.10;  // the effector comes down from this far above the start [m], >= 0
   /// Tool orientations sampled: elevation of the palm -> effector line below the horizontal
   /// (min..max, step) [rad]; yaw of that line about z_R either side of the pull line [rad];
