@@ -494,7 +494,8 @@ IkResult CartesianSolver::Solve(const Eigen::Isometry3d& X_BT_target, const Eige
 
   Eigen::VectorXd q_final = q;
   Ipopt::ApplicationReturnStatus ipopt_status = Ipopt::Solve_Succeeded;
-  const bool run_ipopt = !m.options.presolve || m.options.polish || !found;
+  const bool run_ipopt =
+      !m.options.presolve || (found ? m.options.polish : m.options.ipopt_after_failed_presolve);
   if (run_ipopt) {
     m.nlp->Setup(X_BT_target, q, m.options.position_tolerance_m, m.options.orientation_tolerance_rad);
     // From a reached pose Ipopt only has to slide along the constraints: a small monotone

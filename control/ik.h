@@ -33,6 +33,10 @@ struct IkOptions {
   /// nearer rest). Off by default: Ipopt costs ~0.6 ms per iteration here and needs ~20 from
   /// there (bench "ik": ~15 ms median vs 0.25 ms). Ipopt always runs when the pre-solve fails.
   bool polish = false;
+  /// Run Ipopt when the pre-solve failed (from the warm start and every restart). false: report
+  /// the failure at once; for screening many candidate poses, most of them out of reach, where
+  /// Ipopt's rescue costs ~0.6 ms per iteration and rarely succeeds. Needs presolve.
+  bool ipopt_after_failed_presolve = true;
   /// Ipopt max_iter when polishing a pose the pre-solve already reached, > 0.
   int polish_max_iterations = 50;
   double polish_mu_init = 1e-6;            // Ipopt mu_init (monotone strategy) after a pre-solve, > 0

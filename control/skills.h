@@ -319,9 +319,18 @@ struct PullOptions {
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
   double empty_hand_tol = 0.05;
   double arm_arrival_tol = 0.08;  // largest arm joint error accepted above the start [rad], > 0
-  IkOptions ik;                   // waypoint solves
+  /// Waypoint solves. Without Ipopt after a failed pre-solve: planning a pull tries hundreds of
+  /// poses, most of them out of reach, and Ipopt's rescue (rarely successful, ~0.6 ms an
+  /// iteration) made the plan ~9x slower (benchmarks/control_benchmark.cpp BM_PlanPull: 8.6 s ->
+  /// 0.93 s with the screening's; pull-gt's success unchanged, see the session-5 note).
+  IkOptions ik = [] {
+    IkOptions o;
+    o.ipopt_after_failed_presolve = false;
+    return o;
+  }();
   int screening_restarts = 3;     // cheap IK for sampled orientations: restarts, >= 0
-  int screening_ipopt_iterations = 10;  // and Ipopt iterations, > 0
+  /// And Ipopt iterations after a failed pre-solve, >= 0 (0: none, the default; 10 until session 5).
+  int screening_ipopt_iterations = 0;
   /// Called, when set, after each stage that moved the robot, with the stage's name:
   /// "above_start" (transfer done), "at_start" (descent done),
   /// "dragged", "lifted". For observers; must not move the robot.
