@@ -26,7 +26,7 @@ struct EpisodeRequest {
   std::filesystem::path affordance_model = DefaultAffordanceModelPath();
   std::filesystem::path out_dir;  // result.json and images go here (created); empty = no files
   bool video = false;             // write video.mp4 from the overview camera
-  /// Write overview|side PNGs of the scene after each stage of the tool grasp and the action to
+  /// Write overview|side PNGs of the scene after each stage of the tool grasp, the action, the put-down and the ball grasp to
   /// out_dir/frames (for debugging; each costs ~0.2 s).
   bool frames = false;
   bool quiet = false;             // no progress lines, no summary on stdout

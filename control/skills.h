@@ -448,7 +448,8 @@ struct PutDownResult {
 /// a horizontal surface at height p_R_place.z(), in R) with the tool's handle horizontal, lowered
 /// until its lowest point (tool_radius_m below the handle axis) is release_height_m above the
 /// surface, opens the hand, waits, and lifts the open hand. Tries palm yaws about z_R until IK
-/// converges. Throws std::invalid_argument for bad options or non-finite input.
+/// converges; when none does, nothing has moved (placed = false, with the reason). Throws
+/// std::invalid_argument for bad options or non-finite input.
 PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
                       const Eigen::Vector3d& p_R_place, double tool_radius_m, const PutDownOptions& options = {});
 
