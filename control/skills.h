@@ -433,7 +433,13 @@ struct PutDownOptions {
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
   MotionOptions open{0.5, 0.01, 0.02, 0.05, 0.0};
   double settle_time = 0.5;        // wait after opening [s], >= 0
-  IkOptions ik;
+  /// Palm yaws and places out of reach are common: no Ipopt rescue after a failed pre-solve (as
+  /// PullOptions::ik).
+  IkOptions ik = [] {
+    IkOptions o;
+    o.ipopt_after_failed_presolve = false;
+    return o;
+  }();
   void Validate() const;
 };
 
