@@ -448,8 +448,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         // The tool in the palm as planned: the perceived tool pose seen from the grasp pose.
         X_PT = g.X_RP_grasp.inverse() * tool.X_RT;
         holding = true;
-      } else if (g.status == control::GraspStatus::kUnreachable) {
+      } else {
         // Thesis Fig. 5.20: point at the tool, open the hand, wait; a person puts it in the hand.
+        // The thesis asks for help when the tool is out of reach; the robot here also asks when
+        // it could not get its hand there (blocked on the way, no complete path) or closed it on
+        // nothing: the episode goes on, recorded as assisted.
         const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
         const control::HandOverResult h =
             control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
@@ -459,7 +462,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         holding = h.holding;
         X_PT = PalmGraspFrame(desc) * X_TH.inverse();  // where the person put it
         s.outcome = "handed_over";
-        s.reason = h.holding ? "out of reach: " + g.reason : h.reason;
+        s.reason = h.holding ? std::string(control::ToString(g.status)) + ": " + g.reason : h.reason;
       }
       s.ok = holding;
       const double z1 = world.ground_truth().Pose(tool_body).translation().z();
