@@ -508,7 +508,6 @@ void RequireFinite(const Eigen::Isometry3d& X, const char* function, const char*
   }
 }
 
-
 // Follows joint-space waypoints with the hand targets untouched.
 void FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
                      const MotionOptions& motion) {

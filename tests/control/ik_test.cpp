@@ -88,6 +88,27 @@ TEST_F(IkTest, UnreachableTargetsAreReportedNotThrown) {
   }
 }
 
+// For screening many poses: no Ipopt after a failed pre-solve reports the failure at once, and a
+// reachable target still converges by the pre-solve alone.
+TEST_F(IkTest, WithoutIpoptRescueFailuresAreReportedAtOnce) {
+  IkOptions options;
+  options.ipopt_after_failed_presolve = false;
+  CartesianSolver solver(*chain_, robot_->HomeQ(), options);
+  Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());
+  X_RT.translation() = Eigen::Vector3d(-1.5, 0.1, 0.1);
+  const IkResult far = solver.Solve(X_RT, robot_->HomeQ());
+  EXPECT_EQ(far.status, IkStatus::kUnreachable) << ToString(far.status);
+  EXPECT_EQ(far.ipopt_iterations, 0);
+  Rng rng(DeriveSeed(1, "ik_test_no_rescue"));
+  int converged = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const IkResult r = solver.Solve(chain_->TipPose(RandomArmQ(rng)), robot_->HomeQ());
+    converged += r.status == IkStatus::kConverged ? 1 : 0;
+    EXPECT_EQ(r.ipopt_iterations, 0);
+  }
+  EXPECT_GE(converged, 19);
+}
+
 TEST_F(IkTest, BadInputIsNamed) {
   CartesianSolver solver(*chain_, robot_->HomeQ());
   Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());

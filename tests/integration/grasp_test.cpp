@@ -62,6 +62,11 @@ TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
   bad.close_time = 0.1;
   EXPECT_THAT([&] { control::GraspHandle(robot, scene.robot, Eigen::Isometry3d::Identity(), bad); },
               ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("close_time")));
+  EXPECT_THAT(
+      [&] {
+        control::GraspToolForAction(robot, scene.robot, Eigen::Isometry3d::Identity(), Eigen::Vector3d::Zero(), -0.1);
+      },
+      ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("max_slide_m")));
   // 2 m in front of the robot: out of reach, and nothing moves.
   X_RH = Eigen::Isometry3d::Identity();
   X_RH.translation() = Eigen::Vector3d(-2.0, 0.2, 0.0);
