@@ -453,7 +453,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         // The thesis asks for help when the tool is out of reach; the robot here also asks when
         // it could not get its hand there (blocked on the way, no complete path) or closed it on
         // nothing: the episode goes on, recorded as assisted.
-        const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
+        // The person holds it out by the handle's end away from the effector, as the robot's own
+        // grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it reaches further.
+        Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
+        const Eigen::Vector3d z_H = X_TH.linear().col(2);
+        const double toward_effector = (model->effector.center - model->handle.center).dot(z_H) >= 0 ? 1.0 : -1.0;
+        X_TH.translation() -= toward_effector * 0.6 * FreeHandleSlide(desc, model->handle.length) * z_H;
         const control::HandOverResult h =
             control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
               world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
