@@ -17,7 +17,6 @@
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
-#include "robot/robot_model.h"
 #include "sim/renderer.h"
 #include "sim/scene_composer.h"
 #include "sim/world.h"
@@ -137,10 +136,6 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   };
   sim::SimRobot robot(world);
   // The palm where the encoders put it (forward kinematics), as the robot knows it.
-  auto palm_from_encoders = [&] {
-    return robot::LinkPose(scene.robot.model, ModelQ(scene.robot, robot.JointNames(), robot.ReadEncoders()),
-                           scene.robot.palm_frame);
-  };
   const Eigen::Isometry3d X_WT_rest = world.ground_truth().Pose(body);
   const Eigen::Isometry3d X_TH = HandleFrame(model->handle);
   const Eigen::Isometry3d X_RH = X_RW * X_WT_rest * X_TH;
@@ -171,9 +166,11 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   out.in_hand_working_dir_P = X_PT.linear() * Eigen::Vector3d::UnitX();
   {
     // How the tool sits in the hand after the lift (ground truth) against what the robot assumes.
-    const Eigen::Isometry3d X_PT_truth = palm_from_encoders().inverse() * X_RW * world.ground_truth().Pose(body);
-    out.lift_slip_m = (X_PT_truth * model->effector.center - X_PT * model->effector.center).norm();
-    out.lift_pivot_deg = Eigen::AngleAxisd(X_PT_truth.linear() * X_PT.linear().transpose()).angle() * 180 / M_PI;
+    const Eigen::Isometry3d X_PT_truth =
+        PalmPoseFromEncoders(scene.robot, robot).inverse() * X_RW * world.ground_truth().Pose(body);
+    const InHandError after_lift = InHandPoseError(X_PT, X_PT_truth, model->effector.center);
+    out.lift_slip_m = after_lift.effector_m;
+    out.lift_pivot_deg = after_lift.rotation_deg;
   }
   if (options.inspect_held_tool) {
     // The robot's eye, as the episode has it: rendered frames, camera pose from the encoders.
@@ -189,8 +186,9 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
     out.inspected = view.estimate.ok;
     out.inspect_reason = view.estimate.reason;
     const Eigen::Isometry3d X_PT_truth = view.X_RP.inverse() * X_RW * world.ground_truth().Pose(body);
-    out.used_pose_error_deg = Eigen::AngleAxisd(X_PT.linear() * X_PT_truth.linear().transpose()).angle() * 180 / M_PI;
-    out.used_effector_error_m = (X_PT * model->effector.center - X_PT_truth * model->effector.center).norm();
+    const InHandError used = InHandPoseError(X_PT, X_PT_truth, model->effector.center);
+    out.used_pose_error_deg = used.rotation_deg;
+    out.used_effector_error_m = used.effector_m;
   }
   if (options.inspect_held_tool) frame("1b_inspected");  // its own GL context: after the eye's is gone
   out.ball_start_R = ball_R();
@@ -206,7 +204,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
       reached_start = true;
       out.ball_moved_before_drag_m = (ball_R() - out.ball_start_R).norm();
       X_RT_at_start = X_RW * world.ground_truth().Pose(body);
-      X_RP_at_start = palm_from_encoders();
+      X_RP_at_start = PalmPoseFromEncoders(scene.robot, robot);
     }
     if (!frames_dir.empty()) frame("2" + std::string(1, static_cast<char>('a' + stage_index++)) + "_pull_" + stage);
   };

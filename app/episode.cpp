@@ -489,12 +489,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       const perception::HeldToolEstimate& e = view.estimate;
       // Scoring only: how far the plan's and the used in-hand poses are from the truth.
       const Eigen::Isometry3d X_PT_truth = view.X_RP.inverse() * X_RW * world.ground_truth().Pose(tool_body);
-      auto error_deg = [&](const Eigen::Isometry3d& X) {
-        return Eigen::AngleAxisd(X.linear() * X_PT_truth.linear().transpose()).angle() * 180 / M_PI;
-      };
-      auto effector_error_m = [&](const Eigen::Isometry3d& X) {
-        return (X * model->effector.center - X_PT_truth * model->effector.center).norm();
-      };
+      const InHandError plan_error = InHandPoseError(X_PT_plan, X_PT_truth, model->effector.center);
+      const InHandError used_error = InHandPoseError(view.X_PT, X_PT_truth, model->effector.center);
       X_PT = view.X_PT;
       s.ok = true;  // without a plausible estimate the plan's pose is kept
       s.outcome = e.ok ? "corrected" : "kept_plan";
@@ -503,10 +499,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"points", e.points},      {"fit_error_m", e.fit_error_m},
                    {"correction_deg", e.correction_deg}, {"correction_m", e.correction_m},
                    {"axis_offset_m", e.axis_offset_m},
-                   {"plan_error_deg_truth", error_deg(X_PT_plan)},
-                   {"plan_effector_error_m_truth", effector_error_m(X_PT_plan)},
-                   {"used_error_deg_truth", error_deg(X_PT)},
-                   {"used_effector_error_m_truth", effector_error_m(X_PT)}};
+                   {"plan_error_deg_truth", plan_error.rotation_deg},
+                   {"plan_effector_error_m_truth", plan_error.effector_m},
+                   {"used_error_deg_truth", used_error.rotation_deg},
+                   {"used_effector_error_m_truth", used_error.effector_m}};
       if (!request.out_dir.empty()) cv::imwrite((request.out_dir / "in_hand.png").string(), view.picture);
     });
     if (affordance) {

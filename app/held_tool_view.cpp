@@ -5,7 +5,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/scene_setup.h"
-#include "robot/robot_model.h"
 
 namespace toolbench::app {
 namespace {
@@ -28,9 +27,7 @@ void DrawModel(cv::Mat& bgr, const RgbdFrame& frame, const toollib::ToolModel& m
 HeldToolView InspectHeldTool(RobotInterface& robot, const robot::RobotDescription& desc,
                              const std::function<RgbdFrame()>& see, const toollib::ToolModel& model,
                              const Eigen::Isometry3d& X_PT_prior, const perception::HeldToolOptions& options) {
-  auto palm = [&] {
-    return robot::LinkPose(desc.model, ModelQ(desc, robot.JointNames(), robot.ReadEncoders()), desc.palm_frame);
-  };
+  auto palm = [&] { return PalmPoseFromEncoders(desc, robot); };
   // The middle of the tool's mesh, where the prior puts it.
   const Eigen::Vector3d p_T_middle =
       0.5 * (model.mesh.vertices.rowwise().minCoeff() + model.mesh.vertices.rowwise().maxCoeff()).cast<double>();

@@ -92,6 +92,17 @@ Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot, c
   return robot::LinkPose(robot.model, q, robot.camera_frame);
 }
 
+Eigen::Isometry3d PalmPoseFromEncoders(const robot::RobotDescription& robot, const RobotInterface& interface) {
+  const Eigen::VectorXd q = ModelQ(robot, interface.JointNames(), interface.ReadEncoders());
+  return robot::LinkPose(robot.model, q, robot.palm_frame);
+}
+
+InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry3d& X_PT_truth,
+                            const Eigen::Vector3d& p_T_effector) {
+  return {Eigen::AngleAxisd(X_PT.linear() * X_PT_truth.linear().transpose()).angle() * 180 / M_PI,
+          (X_PT * p_T_effector - X_PT_truth * p_T_effector).norm()};
+}
+
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
   const Eigen::Isometry3d X_RK = sim::RackPose(spec.rack);
   return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);

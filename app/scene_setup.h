@@ -53,6 +53,19 @@ Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<s
 /// camera pose perception may use.
 Eigen::Isometry3d CameraPoseFromEncoders(const robot::RobotDescription& robot, const RobotInterface& interface);
 
+/// Palm frame pose in the root frame from the encoders (forward kinematics of the URDF).
+Eigen::Isometry3d PalmPoseFromEncoders(const robot::RobotDescription& robot, const RobotInterface& interface);
+
+/// How far an assumed in-hand tool pose X_PT is from the true one (for scoring only): the
+/// rotation between them [deg] and the distance between the effector centres p_T_effector they
+/// put in the palm frame [m].
+struct InHandError {
+  double rotation_deg = 0.0;
+  double effector_m = 0.0;
+};
+InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry3d& X_PT_truth,
+                            const Eigen::Vector3d& p_T_effector);
+
 /// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
 
