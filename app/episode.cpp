@@ -311,8 +311,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
   auto grasp_ball = [&]() {
     run_stage("grasp_ball", [&](StageRecord& s) {
       const double z0 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
-      const control::GraspResult g = control::GraspBall(robot, desc, ball.p_RB, ball_radius);
-      stage_frame("grasp_ball");
+      control::BallGraspOptions ball_options;
+      ball_options.on_stage = [&](const char* stage) { stage_frame(std::string("ball_") + stage); };
+      const control::GraspResult g = control::GraspBall(robot, desc, ball.p_RB, ball_radius, ball_options);
       s.ok = g.status == control::GraspStatus::kGrasped;
       s.outcome = control::ToString(g.status);
       s.reason = g.reason;

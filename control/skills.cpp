@@ -1282,6 +1282,7 @@ void BallGraspOptions::Validate() const {
   if (!(lift_m >= 0)) fail("lift_m", lift_m, ">= 0");
   if (!(pregrasp_up_m >= 0)) fail("pregrasp_up_m", pregrasp_up_m, ">= 0");
   if (!(palm_gap_m >= 0)) fail("palm_gap_m", palm_gap_m, ">= 0");
+  if (!(clear_height_m > 0)) fail("clear_height_m", clear_height_m, "> 0");
   if (!(roll_step_rad > 0 && roll_step_rad <= M_PI)) fail("roll_step_rad", roll_step_rad, "in (0, pi]");
   if (tilts_rad.empty()) ThrowInvalid("BallGraspOptions: tilts_rad is empty (expected at least one tilt)");
   for (double t : tilts_rad) {
@@ -1354,49 +1355,91 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  // Short moves from where the hand is: no steps toward the rest posture, which jump IK branches
+  // (0.76 rad for a 3 cm rise from a put-down posture).
+  IkOptions local_options = options.ik;
+  local_options.rest_iterations = 0;
+  CartesianSolver local(chain, desc.HomeQ(), local_options);
   const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
   const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   GraspResult result;
-  Eigen::VectorXd q_pre;
-  std::vector<Eigen::VectorXd> approach, lift;
-  bool planned = false;
-  for (size_t t = 0; t < options.tilts_rad.size() && !planned; ++t) {
-    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, options.tilts_rad[t], options)) {
-      ++result.candidates;
-      const IkResult grasp = solver.Solve(X, q_now);
-      if (!Converged(grasp)) continue;
-      ++result.candidates_feasible;
-      Eigen::Isometry3d X_pre = X;
-      X_pre.translation() += options.pregrasp_up_m * up - 0.5 * options.pregrasp_up_m * X.linear().col(2);
-      const IkResult pre = solver.Solve(X_pre, grasp.q);
-      if (!Converged(pre)) continue;
-      approach = LineWaypoints(solver, X_pre, X, 4, pre.q);
-      if (approach.size() < 4) continue;
-      Eigen::Isometry3d X_up = X;
-      X_up.translation() += options.lift_m * up;
-      lift = LineWaypoints(solver, X, X_up, 3, approach.back());
-      if (lift.size() < 3) continue;
-      q_pre = pre.q;
-      result.X_RP_grasp = X;
-      result.rest_cost = grasp.rest_cost;
-      planned = true;
-      break;
+  // The crossing (BallGraspOptions::clear_height_m): the palm keeps above `floor` while within
+  // `near` of the ball horizontally, on a joint-space line sampled every ~0.05 rad.
+  const double near = radius + options.clear_height_m;
+  auto crossing_clear = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, double floor) {
+    const int n = std::max(2, static_cast<int>(std::ceil(JointStep(a, b) / 0.05)));
+    for (int i = 1; i < n; ++i) {
+      const Eigen::Vector3d p = chain.TipPose(a + (static_cast<double>(i) / n) * (b - a)).translation();
+      if (Eigen::Vector2d(p.x() - p_RB.x(), p.y() - p_RB.y()).norm() < near && p.z() < floor) return false;
     }
+    return true;
+  };
+  const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
+  Eigen::VectorXd q_pre, q_high, q_from = q_now;
+  std::vector<Eigen::VectorXd> rise, down, approach, lift;
+  bool planned = false;
+  for (const double height : {options.clear_height_m, 2.0 * options.clear_height_m}) {
+    const double z_clear = p_RB.z() + radius + height;
+    rise.clear();
+    if (X_RP_now.translation().z() < z_clear) {
+      Eigen::Isometry3d X_up = X_RP_now;
+      X_up.translation().z() = z_clear;
+      rise = LineWaypoints(local, X_RP_now, X_up, 3, q_now, 0.3);  // as high as IK goes
+    }
+    q_from = rise.empty() ? q_now : rise.back();
+    result.candidates = result.candidates_feasible = 0;
+    for (size_t t = 0; t < options.tilts_rad.size() && !planned; ++t) {
+      for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, options.tilts_rad[t], options)) {
+        ++result.candidates;
+        const IkResult grasp = solver.Solve(X, q_now);
+        if (!Converged(grasp)) continue;
+        ++result.candidates_feasible;
+        Eigen::Isometry3d X_pre = X;
+        X_pre.translation() += options.pregrasp_up_m * up - 0.5 * options.pregrasp_up_m * X.linear().col(2);
+        const IkResult pre = solver.Solve(X_pre, grasp.q);
+        if (!Converged(pre)) continue;
+        Eigen::Isometry3d X_high = X_pre;
+        X_high.translation().z() = std::max(X_pre.translation().z(), z_clear);
+        const IkResult high = solver.Solve(X_high, pre.q);
+        if (!Converged(high) || !crossing_clear(q_from, high.q, z_clear - 0.5 * height)) continue;
+        down = LineWaypoints(solver, X_high, X_pre, 3, high.q, 0.3);
+        if (down.size() < 3) continue;
+        approach = LineWaypoints(solver, X_pre, X, 4, down.back());
+        if (approach.size() < 4) continue;
+        Eigen::Isometry3d X_up = X;
+        X_up.translation() += options.lift_m * up;
+        lift = LineWaypoints(solver, X, X_up, 3, approach.back());
+        if (lift.size() < 3) continue;
+        q_pre = down.back();
+        q_high = high.q;
+        result.X_RP_grasp = X;
+        result.rest_cost = grasp.rest_cost;
+        planned = true;
+        break;
+      }
+    }
+    if (planned) break;
   }
   result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
   if (!planned) {
     result.status = result.candidates_feasible == 0 ? GraspStatus::kUnreachable : GraspStatus::kIkFailed;
     result.reason = Cat("no complete top/side grasp path to the ball at (", p_RB.transpose(), ") m in R (",
-                        result.candidates_feasible, " of ", result.candidates, " palm poses reachable)");
+                        result.candidates_feasible, " of ", result.candidates,
+                        " palm poses reachable; none with a crossing that keeps the hand above the ball)");
     return result;
   }
   double t0 = robot.Time();
-  std::map<std::string, double> goal = ChainGoal(chain, q_pre);
+  MotionOptions step = options.waypoint;
+  step.timeout = 0.1;
+  FollowWaypoints(robot, chain, rise, step);
+  std::map<std::string, double> goal = ChainGoal(chain, q_high);
   for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
-  const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
+  MoveJoints(robot, goal, options.transfer);
+  FollowWaypoints(robot, chain, down, step);
   result.transfer_s = robot.Time() - t0;
   std::string worst;
-  const double arm_error = transfer.reached ? 0.0 : ChainError(robot, chain, q_pre, &worst);
+  const double arm_error = ChainError(robot, chain, q_pre, &worst);
+  if (options.on_stage) options.on_stage("pre_grasp");
   if (arm_error > 0.08) {
     result.status = GraspStatus::kMotionTimeout;
     result.reason = Cat("pre-grasp not reached: ", worst, " off by ", arm_error, " rad");
@@ -1405,6 +1448,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   t0 = robot.Time();
   FollowWaypoints(robot, chain, approach, options.waypoint);
   result.approach_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("at_grasp");
   t0 = robot.Time();
   MotionOptions close = options.waypoint;
   close.duration = options.close_time;
@@ -1412,6 +1456,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   MoveJoints(robot, desc.hand_closed, close);
   robot.Wait(0.3);
   result.close_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("closed");
   const double gap = FingerGap(robot, desc);
   if (gap < options.empty_hand_tol) {
     result.status = GraspStatus::kEmptyHand;
@@ -1422,6 +1467,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   FollowWaypoints(robot, chain, lift, options.waypoint);
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
+  if (options.on_stage) options.on_stage("lifted");
   result.status = GraspStatus::kGrasped;
   return result;
 }

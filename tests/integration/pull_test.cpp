@@ -8,6 +8,9 @@
 #include "app/bench_pull.h"
 #include "app/scene_setup.h"
 #include "common/rng.h"
+#include "control/ik.h"
+#include "control/kinematics.h"
+#include "control/motion.h"
 #include "control/skills.h"
 #include "sim/world.h"
 
@@ -84,6 +87,60 @@ TEST_P(PullFromRackTest, ToolFromItsGroundTruthHandlePullsTheBallIntoReach) {
 }
 
 INSTANTIATE_TEST_SUITE_P(RakeAndHook, PullFromRackTest, ::testing::Values("rake_4", "hook_1"));
+
+// The ball in reach, the open hand low on the table beside it (where a put-down leaves it): the
+// hand rises and crosses above the ball before coming down on it, and lifts it. A direct
+// joint-space move from such a posture swept the hand through the ball and knocked it off the
+// table in 5 of 50 random episodes (session 6).
+TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  const LoadedScene scene = LoadScene(request);
+  sim::World world(scene.composed.mjcf, "ball grasp");
+  world.SettleFreeBodies(scene.spec.physics.settle_time);
+  sim::SimRobot robot(world);
+  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+  const std::string& ball = scene.composed.ball_body;
+  auto ball_R = [&] { return Eigen::Vector3d(X_RW * world.ground_truth().Pose(ball).translation()); };
+  const double radius = scene.spec.ball.radius;
+  Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();
+  X_RB.translation() = Eigen::Vector3d(-0.45, 0.03, ball_R().z());
+  world.TeleportFreeBody(ball, scene.composed.X_WR * X_RB);
+  robot.Wait(0.3);
+  const Eigen::Vector3d p_RB = ball_R();
+  ASSERT_TRUE(control::BallInReach(scene.robot, scene.robot.HomeQ(), p_RB, radius));
+
+  // The open hand palm-down 4 cm above the table, 15 cm to the right of the ball and 3 cm nearer.
+  const control::KinematicChain chain = control::MakeRightArmChain(scene.robot.model, scene.robot.palm_frame);
+  control::CartesianSolver solver(chain, scene.robot.HomeQ());
+  const Eigen::Vector3d p_low(p_RB.x() + 0.03, p_RB.y() - 0.15, p_RB.z() - radius + 0.04);
+  control::IkResult low;
+  for (int k = 0; k < 12 && low.status != control::IkStatus::kConverged; ++k) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = (Eigen::AngleAxisd(k * M_PI / 6, Eigen::Vector3d::UnitZ()) *
+                  Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()))
+                     .toRotationMatrix();
+    X.translation() = p_low;
+    low = solver.Solve(X, scene.robot.HomeQ());
+  }
+  ASSERT_EQ(low.status, control::IkStatus::kConverged);
+  std::map<std::string, double> goal;
+  for (int i = 0; i < chain.num_joints(); ++i) goal[chain.joint_names()[i]] = low.q[chain.q_indices()[i]];
+  for (const auto& [joint, value] : scene.robot.hand_open) goal[joint] = value;
+  control::MoveJoints(robot, goal, {3.0, 0.01, 0.02, 0.05, 1.0});
+  ASSERT_LT((ball_R() - p_RB).norm(), 0.01) << "setting up moved the ball";
+
+  control::BallGraspOptions options;
+  Eigen::Vector3d at_pre_grasp = Eigen::Vector3d::Constant(std::nan(""));
+  options.on_stage = [&](const char* stage) {
+    if (std::string(stage) == "pre_grasp") at_pre_grasp = ball_R();
+  };
+  const double z0 = ball_R().z();
+  const control::GraspResult g = control::GraspBall(robot, scene.robot, p_RB, radius, options);
+  ASSERT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
+  EXPECT_LT((at_pre_grasp - p_RB).norm(), 0.01) << "the way to the pre-grasp touched the ball";
+  EXPECT_GT(ball_R().z() - z0, 0.03) << "the ball is lifted";
+}
 
 TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
   SceneRequest request;
