@@ -73,6 +73,21 @@ struct Plan {
 
 bool Converged(const IkResult& r) { return r.status == IkStatus::kConverged; }
 
+// Largest gap between a long finger joint's encoder and its hand_closed target [rad]: near zero
+// when the fingers closed on nothing.
+double FingerGap(const RobotInterface& robot, const robot::RobotDescription& desc) {
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd enc = robot.ReadEncoders();
+  double max_gap = 0.0;
+  for (const auto& [joint, value] : desc.hand_closed) {
+    if (joint.rfind("r_thumb", 0) == 0) continue;
+    const auto it = std::find(names.begin(), names.end(), joint);
+    if (it == names.end()) continue;
+    max_gap = std::max(max_gap, std::abs(enc[it - names.begin()] - value));
+  }
+  return max_gap;
+}
+
 // Largest |encoder - goal| over the chain joints [rad] (the hand joints squeezing a tool never
 // "arrive", so MoveJoints' own verdict cannot be used while holding one); names the joint.
 double ChainError(const RobotInterface& robot, const KinematicChain& chain, const Eigen::VectorXd& q_model_goal,
@@ -149,6 +164,7 @@ const char* ToString(GraspStatus status) {
     case GraspStatus::kIkFailed: return "ik_failed";
     case GraspStatus::kMotionTimeout: return "motion_timeout";
     case GraspStatus::kEmptyHand: return "empty_hand";
+    case GraspStatus::kDropped: return "dropped";
   }
   return "unknown";
 }
@@ -441,20 +457,11 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   robot.Wait(options.settle_time);
   result.close_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("closed");
-  {
-    // Empty hand: every long finger joint reached its closed target.
-    const Eigen::VectorXd enc = robot.ReadEncoders();
-    double max_gap = 0.0;
-    for (const auto& [joint, value] : desc.hand_closed) {
-      if (joint.rfind("r_thumb", 0) == 0) continue;
-      const auto it = std::find(names.begin(), names.end(), joint);
-      max_gap = std::max(max_gap, std::abs(enc[it - names.begin()] - value));
-    }
-    if (max_gap < options.empty_hand_tol) {
-      result.status = GraspStatus::kEmptyHand;
-      result.reason = Cat("fingers closed to within ", max_gap, " rad of hand_closed: nothing in the hand");
-      return result;
-    }
+  // Empty hand: every long finger joint reached its closed target.
+  if (const double gap = FingerGap(robot, desc); gap < options.empty_hand_tol) {
+    result.status = GraspStatus::kEmptyHand;
+    result.reason = Cat("fingers closed to within ", gap, " rad of hand_closed: nothing in the hand");
+    return result;
   }
 
   // 4. Lift straight up and hold.
@@ -465,6 +472,13 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("lifted");
+  // Closed on the handle, then all the way during the lift: the tool slipped out (a stick lying
+  // on the rack's ledge, held near one end, fell in 1 of 50 random episodes).
+  if (const double gap = FingerGap(robot, desc); gap < options.empty_hand_tol) {
+    result.status = GraspStatus::kDropped;
+    result.reason = Cat("fingers closed to within ", gap, " rad of hand_closed after the lift: the tool slipped out");
+    return result;
+  }
   result.status = GraspStatus::kGrasped;
   return result;
 }
@@ -473,21 +487,6 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
 
 namespace toolbench::control {
 namespace {
-
-// Largest gap between a long finger joint's encoder and its hand_closed target [rad]: near zero
-// when the fingers closed on nothing.
-double FingerGap(const RobotInterface& robot, const robot::RobotDescription& desc) {
-  const std::vector<std::string> names = robot.JointNames();
-  const Eigen::VectorXd enc = robot.ReadEncoders();
-  double max_gap = 0.0;
-  for (const auto& [joint, value] : desc.hand_closed) {
-    if (joint.rfind("r_thumb", 0) == 0) continue;
-    const auto it = std::find(names.begin(), names.end(), joint);
-    if (it == names.end()) continue;
-    max_gap = std::max(max_gap, std::abs(enc[it - names.begin()] - value));
-  }
-  return max_gap;
-}
 
 void RequireHandJoints(const RobotInterface& robot, const robot::RobotDescription& desc, const char* function) {
   const std::vector<std::string> names = robot.JointNames();
@@ -1468,6 +1467,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("lifted");
+  if (const double after = FingerGap(robot, desc); after < options.empty_hand_tol) {
+    result.status = GraspStatus::kDropped;
+    result.reason = Cat("fingers closed to within ", after, " rad of hand_closed after the lift: the ball slipped out");
+    return result;
+  }
   result.status = GraspStatus::kGrasped;
   return result;
 }

@@ -118,6 +118,7 @@ enum class GraspStatus {
   kIkFailed,       // a grasp pose was reachable but the pre-grasp, approach or lift waypoints were not
   kMotionTimeout,  // the arm did not arrive at the pre-grasp in time
   kEmptyHand,      // the fingers closed all the way: nothing between them
+  kDropped,        // the fingers closed on the handle, then all the way during the lift: it slipped out
 };
 
 /// Human-readable name of a status ("grasped", "unreachable", ...).
