@@ -65,7 +65,10 @@ nlohmann::json RunTrial(ExploreContext& ctx, const SweepCase& c) {
   // The regressor's input, from perception's shape analysis of the library model (what the
   // episode uses for a recognised tool) and the pose the hand-over puts the tool in.
   const perception::ModelShape& shape = ctx.shapes.Get(model, ctx.shape_options);
-  const Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(model);
+  // Held as the robot's grasp and the hand-over hold it: choked toward the end away from the
+  // effector (ChokedHandleFrame).
+  const Eigen::Isometry3d X_TH =
+      ChokedHandleFrame(desc, perception::SidecarHandleFrame(model), model.effector.center, model.handle.length);
   const Eigen::Isometry3d X_GT = HeldToolPose(X_TH, roll_deg * M_PI / 180.0);
   const Eigen::Isometry3d X_PT = PalmGraspFrame(desc) * X_GT;
   if (shape.status != perception::ShapeStatus::kOk) {
@@ -108,7 +111,16 @@ nlohmann::json RunTrial(ExploreContext& ctx, const SweepCase& c) {
   control::PullOptions options;
   options.action = *control::ParseToolAction(action);  // validated by ExploreRequest::Validate
   const Eigen::Vector3d u = control::ActionDirection(options.action, start);
-  const control::PullResult pulled = control::PullObject(robot, desc, X_PT, EffectorOf(model), start, radius, options);
+  // The tool pivots and slides as the fingers close on it (up to tens of degrees for thin
+  // handles): the action is planned with the pose it really has in the hand (the supervisor's,
+  // as the ball's; the episode looks at it instead), while the features keep the pose the
+  // hand-over meant, which is all the episode knows when it chooses a tool.
+  const Eigen::Isometry3d X_PT_held =
+      world.ground_truth().Pose(desc.palm_frame).inverse() * world.ground_truth().Pose(body);
+  out["held_pivot_deg"] = Eigen::AngleAxisd(X_PT.linear().transpose() * X_PT_held.linear()).angle() * 180.0 / M_PI;
+  out["held_slide_m"] = (X_PT_held.translation() - X_PT.translation()).norm();
+  const control::PullResult pulled =
+      control::PullObject(robot, desc, X_PT_held, EffectorOf(model), start, radius, options);
   robot.Wait(0.5);  // let the ball come to rest
   const Eigen::Vector3d end = ball_R();
   Eigen::Vector3d d = end - start;

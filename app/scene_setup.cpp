@@ -155,6 +155,15 @@ double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length
   return std::max(0.0, (handle_length - desc.grasp.length) / 2 - margin);
 }
 
+Eigen::Isometry3d ChokedHandleFrame(const robot::RobotDescription& desc, const Eigen::Isometry3d& X_TH,
+                                    const Eigen::Vector3d& p_T_effector, double handle_length, double fraction) {
+  const Eigen::Vector3d z_H = X_TH.linear().col(2);
+  const double toward_effector = (p_T_effector - X_TH.translation()).dot(z_H) >= 0 ? 1.0 : -1.0;
+  Eigen::Isometry3d X = X_TH;
+  X.translation() -= toward_effector * fraction * FreeHandleSlide(desc, handle_length) * z_H;
+  return X;
+}
+
 control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
   control::ToolEffector e;
   e.center_T = model.effector.center;

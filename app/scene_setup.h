@@ -101,6 +101,14 @@ Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc);
 /// length) / 2 - margin, at least 0 (GraspOptions::handle_slide_m).
 double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length, double margin = 0.01);
 
+/// Where the robot holds a tool: the handle frame X_TH (in T, z_H along the handle) moved along
+/// z_H toward the handle's end away from the effector (centre p_T_effector) by `fraction` of
+/// FreeHandleSlide(desc, handle_length). 0.6 is the first choke GraspToolForAction tries (the
+/// tool then reaches furthest); the hand-over and exploration hold tools there too, and the
+/// episode predicts each tool's affordance there.
+Eigen::Isometry3d ChokedHandleFrame(const robot::RobotDescription& desc, const Eigen::Isometry3d& X_TH,
+                                    const Eigen::Vector3d& p_T_effector, double handle_length, double fraction = 0.6);
+
 /// Handle frame H of a tool's handle segment, in T: origin at the handle centre, z_H along the
 /// handle axis (the grasp skills' convention; the rotation about z_H is the shortest turn from z_T).
 Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);
