@@ -375,8 +375,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         double p = -std::numeric_limits<double>::infinity();
         nlohmann::json entry = {{"segment", i}, {"model", t.model}};
         if (t.status == perception::AnalysisStatus::kOk && affordance) {
-          // Perception's handle frame in T, held at each explored roll.
-          const Eigen::Isometry3d X_TH = t.X_RT.inverse() * t.handle.X_FH;
+          // Perception's handle frame in T, choked as the grasp will hold it (the recognised
+          // model's effector tells which end), at each explored roll.
+          Eigen::Isometry3d X_TH = t.X_RT.inverse() * t.handle.X_FH;
+          for (const auto& m : scene.library) {
+            if (m.name == t.model) X_TH = ChokedHandleFrame(desc, X_TH, m.effector.center, t.handle.length);
+          }
           double sum = 0.0;
           nlohmann::json by_roll = nlohmann::json::object();
           for (const double roll : rolls_deg) {
@@ -456,10 +460,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         // nothing: the episode goes on, recorded as assisted.
         // The person holds it out by the handle's end away from the effector, as the robot's own
         // grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it reaches further.
-        Eigen::Isometry3d X_TH = perception::SidecarHandleFrame(*model);
-        const Eigen::Vector3d z_H = X_TH.linear().col(2);
-        const double toward_effector = (model->effector.center - model->handle.center).dot(z_H) >= 0 ? 1.0 : -1.0;
-        X_TH.translation() -= toward_effector * 0.6 * FreeHandleSlide(desc, model->handle.length) * z_H;
+        const Eigen::Isometry3d X_TH = ChokedHandleFrame(desc, perception::SidecarHandleFrame(*model),
+                                                         model->effector.center, model->handle.length);
         const control::HandOverResult h =
             control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
               world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
@@ -532,17 +534,21 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
 
     // ---- 7. Put the tool down on the table, away from the ball. ----
     run_stage("put_down", [&](StageRecord& s) {
-      // Free places on the table, 10 cm in from its sides, on the right hand's side first (the
-      // other side was out of reach in 7 of 16 random episodes), at least 20 cm from where the
-      // ball should be; a place that does not plan has not moved the arm.
+      // Free places on the table, from 10 cm in from its sides to half-way to the middle, on the
+      // right hand's side first (the other side was out of reach in 7 of 16 random episodes), at
+      // least 20 cm from where the ball should be; a place that does not plan has not moved the
+      // arm. (With the four places at the sides only, none was reachable in 3 of 50 episodes,
+      // and the robot then went for the ball with the tool still in its hand.)
       const double x_near = spec.table.center.x() + spec.table.size.x() / 2 - 0.12;
       const double y_side = spec.table.size.y() / 2 - 0.1;
       std::vector<Eigen::Vector3d> places;
       for (const double side : {1.0, -1.0}) {
-        for (const double x : {x_near, spec.table.center.x()}) {
-          const Eigen::Vector3d p(x, spec.table.center.y() + side * y_side, spec.table.top_z);
-          if (Eigen::Vector2d(p.x() - ball_expected_R.x(), p.y() - ball_expected_R.y()).norm() >= 0.2) {
-            places.push_back(p);
+        for (const double y_fraction : {1.0, 0.5}) {
+          for (const double x : {x_near, spec.table.center.x()}) {
+            const Eigen::Vector3d p(x, spec.table.center.y() + side * y_fraction * y_side, spec.table.top_z);
+            if (Eigen::Vector2d(p.x() - ball_expected_R.x(), p.y() - ball_expected_R.y()).norm() >= 0.2) {
+              places.push_back(p);
+            }
           }
         }
       }
