@@ -47,6 +47,9 @@ int RunBench(const BenchRequest& request) {
     ThrowInvalid("bench: shard ", request.shard_index, "/", request.shard_count, " is not valid (expected 0 <= i < N)");
   }
   if (request.episodes < 0) ThrowInvalid("bench: --episodes ", request.episodes, " (expected >= 0)");
+  if (request.hindsight && request.protocol != "random") {
+    ThrowInvalid("bench: --hindsight applies to protocol random only, not '", request.protocol, "'");
+  }
   if (request.extended && request.protocol != "table53") {
     ThrowInvalid("bench: --extended applies to protocol table53 only, not '", request.protocol, "'");
   }

@@ -31,6 +31,10 @@ struct BenchRequest {
   bool resume = false;            // skip cases already recorded in out_dir/results.jsonl
   bool isolate = true;            // false: run cases in this process (for a debugger)
   bool frames = false;            // protocols that support it write overview PNGs per case
+  /// random: after each episode that needed a tool, pull with every tool of its rack from the
+  /// tool's ground-truth handle (pull-gt's case: that tool alone in its cell, the episode's ball)
+  /// and score the episode's choice against the best of them (truth.choice_correct).
+  bool hindsight = false;
 };
 
 /// One benchmark protocol: runs its cases, writes `summary.json` (and whatever else it likes) to

@@ -8,11 +8,83 @@
 
 #include <fmt/format.h>
 
+#include "app/bench_pull.h"
 #include "app/episode.h"
+#include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
 
 namespace toolbench::app {
+
+namespace {
+
+// The choice in hindsight (BenchRequest::hindsight): every tool of the episode's rack pulls the
+// episode's ball from its ground-truth handle (RunPullCase: that tool alone in its cell, the look
+// at it in the hand on), then JudgeChoiceInHindsight; sets truth.hindsight and, when judged,
+// truth.choice_correct.
+void ScoreChoiceInHindsight(const SceneRequest& scene_request, nlohmann::json* result) {
+  nlohmann::json& truth = (*result)["truth"];
+  const LoadedScene scene = LoadScene(scene_request);
+  const std::vector<double> ball = truth.at("ball_start_R").get<std::vector<double>>();
+  PullCaseOptions options;
+  options.put_down_and_grasp_ball = false;
+  options.ball_x_range = {ball.at(0), ball.at(0)};
+  options.ball_y_range = {ball.at(1), ball.at(1)};
+  nlohmann::json pulls = nlohmann::json::array();
+  for (const nlohmann::json& tool : truth.at("tools")) {
+    options.cell = tool.at("cell").get<std::string>();
+    const std::string name = tool.at("name").get<std::string>();
+    nlohmann::json entry = {{"tool", name}, {"cell", options.cell}};
+    try {
+      const PullCaseResult r = RunPullCase(scene, name, DeriveSeed(scene_request.seed, "hindsight/" + name), options);
+      entry["ball_in_reach"] = r.ball_in_reach;
+      entry["displacement_m"] = r.displacement_m;
+      entry["reason"] = r.reason;
+    } catch (const std::exception& e) {  // recorded: the episode's own result must not be lost
+      entry["ball_in_reach"] = false;
+      entry["displacement_m"] = 0.0;
+      entry["reason"] = std::string("error: ") + e.what();
+    }
+    pulls.push_back(entry);
+  }
+  const nlohmann::json judged = JudgeChoiceInHindsight(pulls, result->value("chosen_tool", std::string()));
+  if (judged.contains("correct")) truth["choice_correct"] = judged["correct"];
+  truth["hindsight"] = judged;
+}
+
+}  // namespace
+
+nlohmann::json JudgeChoiceInHindsight(const nlohmann::json& pulls, const std::string& chosen_tool) {
+  if (!pulls.is_array() || pulls.empty()) ThrowInvalid("JudgeChoiceInHindsight: no pulls to judge against");
+  for (const nlohmann::json& p : pulls) {
+    if (!p.contains("tool") || !p.contains("ball_in_reach") || !p.contains("displacement_m") ||
+        !p["ball_in_reach"].is_boolean() || !p["displacement_m"].is_number()) {
+      ThrowInvalid("JudgeChoiceInHindsight: pull ", p.dump(), " lacks tool, ball_in_reach or displacement_m");
+    }
+  }
+  // The best: in reach first, then the longest displacement (a ball flung past the robot or off
+  // the table moved far but is not a better outcome, hence only the reach decides "correct").
+  size_t best = 0;
+  int in_reach = 0;
+  for (size_t i = 0; i < pulls.size(); ++i) {
+    const bool reach = pulls[i]["ball_in_reach"].get<bool>();
+    in_reach += reach;
+    const bool best_reach = pulls[best]["ball_in_reach"].get<bool>();
+    if (reach != best_reach ? reach
+                            : pulls[i]["displacement_m"].get<double>() > pulls[best]["displacement_m"].get<double>()) {
+      best = i;
+    }
+  }
+  const double n = static_cast<double>(pulls.size());
+  nlohmann::json judged = {{"pulls", pulls}, {"best_tool", pulls[best]["tool"]}, {"in_reach", in_reach}};
+  if (in_reach > 0) {
+    bool correct = false;
+    for (const nlohmann::json& p : pulls) correct = correct || (p["ball_in_reach"].get<bool>() && p["tool"] == chosen_tool);
+    judged["correct"] = correct;
+    judged["chance"] = in_reach / n;
+  }
+  return judged;
+}
 
 int RunRandomEpisodesBench(const BenchRequest& request) {
   const int episodes = request.episodes > 0 ? request.episodes : 50;
@@ -30,10 +102,16 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     episode.quiet = true;
     episode.frames = request.frames;
     episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
-    return EpisodeJson(RunEpisode(episode));
+    nlohmann::json result = EpisodeJson(RunEpisode(episode));
+    if (request.hindsight && !result.value("ball_reachable_at_start", true) &&
+        !result.value("chosen_tool", std::string()).empty()) {
+      ScoreChoiceInHindsight(episode.scene, &result);
+    }
+    return result;
   };
   nlohmann::json info;
   info["episodes"] = episodes;
+  info["hindsight"] = request.hindsight;
   ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case));
   return 0;
 }
@@ -45,6 +123,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   std::vector<std::string> stage_order;  // as the episodes ran them (first seen first)
   std::map<std::string, int> failures;
   std::vector<double> wall_s, displacement;
+  std::vector<double> chance;  // per scored choice: 1 / tools on the rack (a random pick's agreement)
   int crashed = 0;
   for (const SweepLine& line : lines) {
     if (!line.value("ok", false)) {
@@ -61,7 +140,10 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
       bool chose = false;
       for (const auto& s : r["stages"]) chose = chose || (s.value("name", "") == "choose_tool" && s.value("ok", false));
       count("choice_made", chose);
-      if (r["truth"].contains("choice_correct")) count("choice_correct", r["truth"]["choice_correct"].get<bool>());
+      if (r["truth"].contains("choice_correct")) {
+        count("choice_correct", r["truth"]["choice_correct"].get<bool>());
+        chance.push_back(r["truth"]["hindsight"].value("chance", std::nan("")));
+      }
       count("grasp_success", r.value("grasp_success", false));
       count("pull_success", r.value("pull_success", false));
       count("assisted", r.value("assisted", false));
@@ -91,6 +173,11 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
                      {"n", rate.n},
                      {"ci95", {lo, hi}}};
   }
+  if (!chance.empty()) {
+    double sum = 0.0;
+    for (double c : chance) sum += c;
+    summary["choice_correct_by_chance"] = sum / static_cast<double>(chance.size());
+  }
   summary["achieved_displacement_m_median"] = Percentile(displacement, 50);
   summary["wall_s_median"] = Percentile(wall_s, 50);
   summary["wall_s_p90"] = Percentile(wall_s, 90);
@@ -109,6 +196,12 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     const auto [lo, hi] = WilsonInterval(rate.ok, rate.n);
     md << fmt::format("| {} | {:.0f} % | {:.0f}–{:.0f} % | {} |\n", name, rate.n ? 100.0 * rate.ok / rate.n : NAN,
                       100 * lo, 100 * hi, rate.n);
+  }
+  if (summary.contains("choice_correct_by_chance")) {
+    md << fmt::format("\nchoice_correct: agreement with the best tool in hindsight (every tool of the rack pulled "
+                      "from its ground-truth handle): the chosen tool brought the ball into reach there, over the "
+                      "episodes where some tool did; a random pick would be right {:.0f} % of the time.\n",
+                      100 * summary["choice_correct_by_chance"].get<double>());
   }
   md << "\n| stage | episodes | wall median ms | wall p90 ms | robot (simulated) median s |\n|---|---|---|---|---|\n";
   for (const std::string& name : stage_order) {

@@ -274,6 +274,9 @@ int main(int argc, char** argv) {
                     "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt), each "
                     "episode's images to --out/episodes (table53 --episodes), or each random episode's "
                     "grasp and action stages to --out/episodes/N/frames (random)");
+    bench->add_flag("--hindsight", bench_request.hindsight,
+                    "random: also pull with every tool of each episode's rack from its ground-truth handle "
+                    "and score the choice against the best in hindsight (about 10 s more per tool)");
   }
 
   app::ExploreRequest explore_request;

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "app/bench_episodes.h"
 #include "app/bench_grasp.h"
 #include "app/bench_ik.h"
 #include "app/bench_pull.h"
@@ -198,12 +199,73 @@ TEST(BenchReportTest, IkReportSeparatesReachableAndUnreachableTargets) {
   EXPECT_DOUBLE_EQ(summary["baseline"]["success_rate"].get<double>(), 0.5);
 }
 
+TEST(HindsightTest, RightWhenTheChosenToolBringsTheBallIntoReach) {
+  auto pull = [](const char* tool, bool in_reach, double m) {
+    return nlohmann::json{{"tool", tool}, {"ball_in_reach", in_reach}, {"displacement_m", m}};
+  };
+  // In reach beats a longer pull that stops short of it (or flings the ball past the robot).
+  const nlohmann::json pulls = {pull("hoe_1", false, 0.60), pull("rake_3", true, 0.12), pull("stick_2", false, 0.0)};
+  nlohmann::json j = JudgeChoiceInHindsight(pulls, "rake_3");
+  EXPECT_EQ(j["best_tool"], "rake_3");
+  EXPECT_EQ(j["in_reach"], 1);
+  EXPECT_TRUE(j["correct"].get<bool>());
+  EXPECT_NEAR(j["chance"].get<double>(), 1.0 / 3, 1e-12);
+  EXPECT_FALSE(JudgeChoiceInHindsight(pulls, "hoe_1")["correct"].get<bool>());
+  // Two tools in reach: either does the job; the longer pull is the best.
+  const nlohmann::json two = {pull("hoe_1", true, 0.15), pull("rake_3", true, 0.25), pull("stick_2", false, 0.3)};
+  EXPECT_EQ(JudgeChoiceInHindsight(two, "hoe_1")["best_tool"], "rake_3");
+  EXPECT_TRUE(JudgeChoiceInHindsight(two, "hoe_1")["correct"].get<bool>());
+  EXPECT_NEAR(JudgeChoiceInHindsight(two, "hoe_1")["chance"].get<double>(), 2.0 / 3, 1e-12);
+  // No tool brought it into reach: nothing to agree with.
+  const nlohmann::json none = {pull("hoe_1", false, 0.07), pull("rake_3", false, 0.02)};
+  EXPECT_EQ(JudgeChoiceInHindsight(none, "rake_3")["best_tool"], "hoe_1");
+  EXPECT_FALSE(JudgeChoiceInHindsight(none, "hoe_1").contains("correct"));
+  EXPECT_THAT([] { JudgeChoiceInHindsight(nlohmann::json::array(), "hoe_1"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("no pulls")));
+  EXPECT_THAT([] { JudgeChoiceInHindsight(nlohmann::json::array({{{"tool", "x"}}}), "x"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("lacks")));
+}
+
+TEST(BenchReportTest, RandomReportScoresTheChoiceBesideChance) {
+  BenchRequest request;
+  request.out_dir = TempDir("random_report");
+  auto line = [](int index, bool correct, double chance) {
+    nlohmann::json truth = {{"choice_correct", correct}, {"hindsight", {{"chance", chance}}}};
+    nlohmann::json stages = nlohmann::json::array(
+        {{{"name", "choose_tool"}, {"ok", true}, {"wall_ms", 1.0}, {"robot_s", 0.0}}});
+    return SweepLine{{"protocol", "random"},
+                     {"index", index},
+                     {"id", "episode/" + std::to_string(index)},
+                     {"ok", true},
+                     {"result",
+                      {{"ball_reachable_at_start", false},
+                       {"grasp_success", true},
+                       {"pull_success", correct},
+                       {"ball_grasp_success", false},
+                       {"assisted", false},
+                       {"achieved_displacement_m", 0.1},
+                       {"failure", ""},
+                       {"wall_s", 10.0},
+                       {"stages", stages},
+                       {"truth", truth}}}};
+  };
+  ReportRandomEpisodes(request, {line(0, true, 0.5), line(1, false, 1.0 / 3), line(2, true, 1.0)});
+  const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
+  EXPECT_EQ(summary["choice_correct"]["successes"], 2);
+  EXPECT_EQ(summary["choice_correct"]["n"], 3);
+  EXPECT_NEAR(summary["choice_correct_by_chance"].get<double>(), (0.5 + 1.0 / 3 + 1.0) / 3, 1e-12);
+  EXPECT_THAT(ReadText(request.out_dir / "summary.md"), HasSubstr("a random pick would be right 61 %"));
+}
+
 TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   BenchRequest request;
   request.protocol = "grasp-gt";
   request.out_dir = TempDir("extended");
   request.extended = true;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--extended")));
+  request.extended = false;
+  request.hindsight = true;
+  EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--hindsight")));
 }
 
 }  // namespace
