@@ -1377,7 +1377,9 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   Eigen::VectorXd q_pre, q_high, q_from = q_now;
   std::vector<Eigen::VectorXd> rise, down, approach, lift;
   bool planned = false;
-  for (const double height : {options.clear_height_m, 2.0 * options.clear_height_m}) {
+  // Higher when the way there dips; lower at the edge of the workspace, where the pose above the
+  // pre-grasp is out of reach (then the pre-grasp itself is the crossing's end).
+  for (const double height : {options.clear_height_m, 2.0 * options.clear_height_m, 0.5 * options.clear_height_m}) {
     const double z_clear = p_RB.z() + radius + height;
     rise.clear();
     if (X_RP_now.translation().z() < z_clear) {

@@ -310,7 +310,9 @@ struct PullOptions {
   /// The drag direction may turn about z_R away from the action's direction (ActionDirection) by
   /// up to this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first
   /// that plans wins, straight first; for a pull, the start then lies nearer a shoulder).
-  double max_pull_turn_rad = 30.0 * M_PI / 180.0;
+  /// pull-gt: 30 deg 20/32 into reach, 60 deg 25/32, 90 deg 25/32 (a drag turned 60 deg still
+  /// moves the ball half its length toward the robot).
+  double max_pull_turn_rad = 60.0 * M_PI / 180.0;
   double pull_turn_step_rad = 15.0 * M_PI / 180.0;  // > 0
   int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
   int drag_waypoints = 10;    // IK waypoints of the drag, >= 2
@@ -474,7 +476,8 @@ struct BallGraspOptions {
   /// The hand crosses to the ball at least this high above the ball's top [m], > 0: from where it
   /// is, straight up to that height (when lower), a joint-space move to above the pre-grasp during
   /// which the palm stays that high (less half of it) while within radius + this of the ball
-  /// horizontally (twice as high when the move dips more), then straight down to the pre-grasp.
+  /// horizontally (twice as high when the move dips more, half as high when the higher poses are
+  /// out of reach), then straight down to the pre-grasp.
   /// A direct joint-space move from the put-down swept the hand through the ball in 5 of 50
   /// random episodes, knocking it off the table.
   double clear_height_m = 0.12;
