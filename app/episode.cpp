@@ -462,10 +462,19 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         // grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it reaches further.
         const Eigen::Isometry3d X_TH = ChokedHandleFrame(desc, perception::SidecarHandleFrame(*model),
                                                          model->effector.center, model->handle.length);
-        const control::HandOverResult h =
-            control::HandOver(robot, desc, tool.handle.center, [&](const Eigen::Isometry3d& X_RP) {
+        // The open hand waits turned 35 deg to the robot's right, between the table and the rack,
+        // and 20 cm up: clear of the rack (a long tool put in a hand held out toward the rack
+        // overlapped it and stuck there), high above the table, and where the head can look at it.
+        control::HandOverOptions hand_over;
+        hand_over.receive_at_R = 0.30 * Eigen::Vector3d(-std::cos(35 * M_PI / 180), std::sin(35 * M_PI / 180), 0.0) +
+                                 0.20 * Eigen::Vector3d::UnitZ();
+        const control::HandOverResult h = control::HandOver(
+            robot, desc, tool.handle.center,
+            [&](const Eigen::Isometry3d& X_RP) {
               world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
-            });
+            },
+            hand_over);
+        stage_frame("hand_over");
         result.assisted = true;
         holding = h.holding;
         X_PT = PalmGraspFrame(desc) * X_TH.inverse();  // where the person put it

@@ -1481,6 +1481,10 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
 void HandOverOptions::Validate() const {
   if (!(point_distance_m > 0)) ThrowInvalid("HandOverOptions: point_distance_m = ", point_distance_m, " (expected > 0)");
   if (!std::isfinite(point_height_m)) ThrowInvalid("HandOverOptions: point_height_m = ", point_height_m, " (expected finite)");
+  if (!receive_at_R.allFinite() && !receive_at_R.array().isNaN().all()) {
+    ThrowInvalid("HandOverOptions: receive_at_R = (", receive_at_R.transpose(),
+                 ") (expected finite, or all NaN to hold the hand out toward the tool)");
+  }
   if (!(wait_s >= 0)) ThrowInvalid("HandOverOptions: wait_s = ", wait_s, " (expected >= 0)");
   if (!(close_time > 0)) ThrowInvalid("HandOverOptions: close_time = ", close_time, " (expected > 0)");
   if (!(settle_time >= 0)) ThrowInvalid("HandOverOptions: settle_time = ", settle_time, " (expected >= 0)");
@@ -1498,9 +1502,14 @@ HandOverResult HandOver(RobotInterface& robot, const robot::RobotDescription& de
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
   const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
-  Eigen::Vector3d dir(p_R_tool.x(), p_R_tool.y(), 0.0);
+  const bool receive_elsewhere = options.receive_at_R.allFinite();
+  const Eigen::Vector3d toward = receive_elsewhere ? options.receive_at_R : p_R_tool;
+  Eigen::Vector3d dir(toward.x(), toward.y(), 0.0);
   dir = dir.norm() > 1e-6 ? dir.normalized() : Eigen::Vector3d(-1, 0, 0);
-  const Eigen::Vector3d p = options.point_distance_m * dir + options.point_height_m * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d p = receive_elsewhere
+                                ? options.receive_at_R
+                                : Eigen::Vector3d(options.point_distance_m * dir +
+                                                  options.point_height_m * Eigen::Vector3d::UnitZ());
   // Palm up (z_P, palm -> held object, points up), tilted toward the robot as far as needed.
   HandOverResult result;
   Eigen::VectorXd q_goal;

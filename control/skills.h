@@ -509,6 +509,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
 struct HandOverOptions {
   double point_distance_m = 0.30;  // the open palm goes this far from the root axis toward the tool [m], > 0
   double point_height_m = 0.10;    // at this height in R [m]
+  /// Where the open palm waits for the tool instead (in R [m]), when finite: e.g. in front of the
+  /// robot above the table, clear of the rack. Held out toward the rack, a long tool put in the
+  /// hand overlapped the rack and the tools beside it and stuck there: the pull's transfer then
+  /// did not arrive (4 of 50 random episodes). NaN (the default): point_distance_m toward the tool.
+  Eigen::Vector3d receive_at_R = Eigen::Vector3d::Constant(std::nan(""));
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
   MotionOptions hand{0.5, 0.01, 0.02, 0.05, 0.0};
   double wait_s = 1.0;             // the open hand waits this long for the tool [s], >= 0

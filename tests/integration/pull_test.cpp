@@ -182,5 +182,27 @@ TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
   EXPECT_LT((p_P_handle - scene.robot.grasp.center).norm(), 0.05) << p_P_handle.transpose();
 }
 
+// The open hand can wait elsewhere than toward the tool (clear of the rack); a half-given
+// receiving point is named.
+TEST(HandOverTest, HandWaitsWhereAskedAndRejectsAPartialPoint) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  const LoadedScene scene = LoadScene(request);
+  sim::World world(scene.composed.mjcf, "hand-over elsewhere");
+  world.SettleFreeBodies(scene.spec.physics.settle_time);
+  sim::SimRobot robot(world);
+  control::HandOverOptions options;
+  options.receive_at_R = Eigen::Vector3d(-0.25, 0.17, 0.20);
+  Eigen::Isometry3d X_RP_seen = Eigen::Isometry3d::Identity();
+  const control::HandOverResult r = control::HandOver(
+      robot, scene.robot, Eigen::Vector3d(-0.2, 0.5, 0.0), [&](const Eigen::Isometry3d& X_RP) { X_RP_seen = X_RP; },
+      options);
+  EXPECT_LT((X_RP_seen.translation() - options.receive_at_R).norm(), 0.03) << X_RP_seen.translation().transpose();
+  EXPECT_FALSE(r.holding) << "nothing was put in the hand";
+  options.receive_at_R.y() = std::nan("");
+  EXPECT_THAT([&] { control::HandOver(robot, scene.robot, Eigen::Vector3d(-0.2, 0.5, 0.0), [](auto&) {}, options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("receive_at_R")));
+}
+
 }  // namespace
 }  // namespace toolbench::app
