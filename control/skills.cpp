@@ -1373,6 +1373,25 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
     }
     return true;
   };
+  // The palm poses on the ball with a converged grasp and pre-grasp IK, solved once for every
+  // crossing height below.
+  struct Reach {
+    Eigen::Isometry3d X, X_pre;
+    IkResult grasp, pre;
+  };
+  std::vector<Reach> reachable;
+  for (const double tilt : options.tilts_rad) {
+    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, tilt, options)) {
+      ++result.candidates;
+      IkResult grasp = solver.Solve(X, q_now);
+      if (!Converged(grasp)) continue;
+      ++result.candidates_feasible;
+      Eigen::Isometry3d X_pre = X;
+      X_pre.translation() += options.pregrasp_up_m * up - 0.5 * options.pregrasp_up_m * X.linear().col(2);
+      IkResult pre = solver.Solve(X_pre, grasp.q);
+      if (Converged(pre)) reachable.push_back({X, X_pre, std::move(grasp), std::move(pre)});
+    }
+  }
   const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
   Eigen::VectorXd q_pre, q_high, q_from = q_now;
   std::vector<Eigen::VectorXd> rise, down, approach, lift;
@@ -1388,36 +1407,25 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
       rise = LineWaypoints(local, X_RP_now, X_up, 3, q_now, 0.3);  // as high as IK goes
     }
     q_from = rise.empty() ? q_now : rise.back();
-    result.candidates = result.candidates_feasible = 0;
-    for (size_t t = 0; t < options.tilts_rad.size() && !planned; ++t) {
-      for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, options.tilts_rad[t], options)) {
-        ++result.candidates;
-        const IkResult grasp = solver.Solve(X, q_now);
-        if (!Converged(grasp)) continue;
-        ++result.candidates_feasible;
-        Eigen::Isometry3d X_pre = X;
-        X_pre.translation() += options.pregrasp_up_m * up - 0.5 * options.pregrasp_up_m * X.linear().col(2);
-        const IkResult pre = solver.Solve(X_pre, grasp.q);
-        if (!Converged(pre)) continue;
-        Eigen::Isometry3d X_high = X_pre;
-        X_high.translation().z() = std::max(X_pre.translation().z(), z_clear);
-        const IkResult high = solver.Solve(X_high, pre.q);
-        if (!Converged(high) || !crossing_clear(q_from, high.q, z_clear - 0.5 * height)) continue;
-        down = LineWaypoints(solver, X_high, X_pre, 3, high.q, 0.3);
-        if (down.size() < 3) continue;
-        approach = LineWaypoints(solver, X_pre, X, 4, down.back());
-        if (approach.size() < 4) continue;
-        Eigen::Isometry3d X_up = X;
-        X_up.translation() += options.lift_m * up;
-        lift = LineWaypoints(solver, X, X_up, 3, approach.back());
-        if (lift.size() < 3) continue;
-        q_pre = down.back();
-        q_high = high.q;
-        result.X_RP_grasp = X;
-        result.rest_cost = grasp.rest_cost;
-        planned = true;
-        break;
-      }
+    for (const Reach& r : reachable) {
+      Eigen::Isometry3d X_high = r.X_pre;
+      X_high.translation().z() = std::max(r.X_pre.translation().z(), z_clear);
+      const IkResult high = solver.Solve(X_high, r.pre.q);
+      if (!Converged(high) || !crossing_clear(q_from, high.q, z_clear - 0.5 * height)) continue;
+      down = LineWaypoints(solver, X_high, r.X_pre, 3, high.q, 0.3);
+      if (down.size() < 3) continue;
+      approach = LineWaypoints(solver, r.X_pre, r.X, 4, down.back());
+      if (approach.size() < 4) continue;
+      Eigen::Isometry3d X_up = r.X;
+      X_up.translation() += options.lift_m * up;
+      lift = LineWaypoints(solver, r.X, X_up, 3, approach.back());
+      if (lift.size() < 3) continue;
+      q_pre = down.back();
+      q_high = high.q;
+      result.X_RP_grasp = r.X;
+      result.rest_cost = r.grasp.rest_cost;
+      planned = true;
+      break;
     }
     if (planned) break;
   }

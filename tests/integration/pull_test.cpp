@@ -20,6 +20,24 @@ namespace {
 using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 
+// The scene with stick_2 on the rack, settled, and the robot in it.
+struct SettledScene {
+  explicit SettledScene(const char* label)
+      : scene(LoadScene(StickRequest())), world(scene.composed.mjcf, label), robot(Settled(world, scene)) {}
+  static SceneRequest StickRequest() {
+    SceneRequest request;
+    request.tools = {"stick_2"};
+    return request;
+  }
+  static sim::World& Settled(sim::World& world, const LoadedScene& scene) {
+    world.SettleFreeBodies(scene.spec.physics.settle_time);
+    return world;
+  }
+  LoadedScene scene;
+  sim::World world;
+  sim::SimRobot robot;
+};
+
 TEST(PullTest, RejectsBadInput) {
   SceneRequest request;
   request.tools = {"stick_2"};
@@ -93,12 +111,10 @@ INSTANTIATE_TEST_SUITE_P(RakeAndHook, PullFromRackTest, ::testing::Values("rake_
 // joint-space move from such a posture swept the hand through the ball and knocked it off the
 // table in 5 of 50 random episodes (session 6).
 TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
-  SceneRequest request;
-  request.tools = {"stick_2"};
-  const LoadedScene scene = LoadScene(request);
-  sim::World world(scene.composed.mjcf, "ball grasp");
-  world.SettleFreeBodies(scene.spec.physics.settle_time);
-  sim::SimRobot robot(world);
+  SettledScene settled("ball grasp");
+  const LoadedScene& scene = settled.scene;
+  sim::World& world = settled.world;
+  sim::SimRobot& robot = settled.robot;
   const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
   const std::string& ball = scene.composed.ball_body;
   auto ball_R = [&] { return Eigen::Vector3d(X_RW * world.ground_truth().Pose(ball).translation()); };
@@ -143,12 +159,10 @@ TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
 }
 
 TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
-  SceneRequest request;
-  request.tools = {"stick_2"};
-  const LoadedScene scene = LoadScene(request);
-  sim::World world(scene.composed.mjcf, "hand-over");
-  world.SettleFreeBodies(scene.spec.physics.settle_time);
-  sim::SimRobot robot(world);
+  SettledScene settled("hand-over");
+  const LoadedScene& scene = settled.scene;
+  sim::World& world = settled.world;
+  sim::SimRobot& robot = settled.robot;
   const std::string body = scene.composed.tools.front().body;
   const toollib::ToolModel* model = nullptr;
   for (const auto& t : scene.library) {
@@ -185,12 +199,9 @@ TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
 // The open hand can wait elsewhere than toward the tool (clear of the rack); a half-given
 // receiving point is named.
 TEST(HandOverTest, HandWaitsWhereAskedAndRejectsAPartialPoint) {
-  SceneRequest request;
-  request.tools = {"stick_2"};
-  const LoadedScene scene = LoadScene(request);
-  sim::World world(scene.composed.mjcf, "hand-over elsewhere");
-  world.SettleFreeBodies(scene.spec.physics.settle_time);
-  sim::SimRobot robot(world);
+  SettledScene settled("hand-over elsewhere");
+  const LoadedScene& scene = settled.scene;
+  sim::SimRobot& robot = settled.robot;
   control::HandOverOptions options;
   options.receive_at_R = Eigen::Vector3d(-0.25, 0.17, 0.20);
   Eigen::Isometry3d X_RP_seen = Eigen::Isometry3d::Identity();
