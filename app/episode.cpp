@@ -490,7 +490,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"axis_flipped", g.axis_flipped},
                    {"roll_deg", g.roll_rad * 180 / M_PI},
                    {"candidates", g.candidates},
-                   {"plan_ms", g.plan_ms}};
+                   {"plan_ms", g.plan_ms},
+                   {"robot_s", {{"transfer", g.transfer_s},
+                                {"approach", g.approach_s},
+                                {"close", g.close_s},
+                                {"lift", g.lift_s}}}};
     });
     if (!holding) return finish();
 

@@ -30,26 +30,25 @@ void MotionOptions::Validate() const {
   require(timeout >= 0, "timeout", timeout, ">= 0");
 }
 
-MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
-                        const MotionOptions& options) {
-  options.Validate();
-  const std::vector<std::string> names = robot.JointNames();
-  const Eigen::VectorXd start = robot.PositionTargets();
-  Eigen::VectorXd target = start;
+namespace {
+
+// The full target vector for `goal` applied over `base` (the joints `goal` does not name keep
+// their value in `base`).
+Eigen::VectorXd Targets(const std::vector<std::string>& names, Eigen::VectorXd base,
+                        const std::map<std::string, double>& goal, const char* function) {
   for (const auto& [name, value] : goal) {
     auto it = std::find(names.begin(), names.end(), name);
-    if (it == names.end()) ThrowInvalid("MoveJoints: unknown joint '", name, "'");
-    if (!std::isfinite(value)) ThrowInvalid("MoveJoints: goal for '", name, "' is ", value);
-    target[it - names.begin()] = value;
+    if (it == names.end()) ThrowInvalid(function, ": unknown joint '", name, "'");
+    if (!std::isfinite(value)) ThrowInvalid(function, ": goal for '", name, "' is ", value);
+    base[it - names.begin()] = value;
   }
-  const double t0 = robot.Time();
-  for (double t = options.command_period; t < options.duration + 1e-9;
-       t += options.command_period) {
-    robot.SetPositionTargets(MinJerkPoint(start, target, t, options.duration));
-    robot.Wait(options.command_period);
-  }
-  robot.SetPositionTargets(target);
+  return base;
+}
 
+// Waits until every joint is within position_tol of its commanded target and slower than
+// velocity_tol, or the timeout passes; t0 is when the motion began.
+MotionResult AwaitArrival(RobotInterface& robot, const std::vector<std::string>& names,
+                          const MotionOptions& options, double t0) {
   MotionResult result;
   const Eigen::VectorXd commanded = robot.PositionTargets();  // after the servo's clamping
   const double deadline = robot.Time() + options.timeout;
@@ -68,6 +67,56 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
   }
   result.elapsed = robot.Time() - t0;
   return result;
+}
+
+}  // namespace
+
+MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
+                        const MotionOptions& options) {
+  options.Validate();
+  const std::vector<std::string> names = robot.JointNames();
+  const Eigen::VectorXd start = robot.PositionTargets();
+  const Eigen::VectorXd target = Targets(names, start, goal, "MoveJoints");
+  const double t0 = robot.Time();
+  for (double t = options.command_period; t < options.duration + 1e-9;
+       t += options.command_period) {
+    robot.SetPositionTargets(MinJerkPoint(start, target, t, options.duration));
+    robot.Wait(options.command_period);
+  }
+  robot.SetPositionTargets(target);
+  return AwaitArrival(robot, names, options, t0);
+}
+
+MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::string, double>>& goals,
+                         const MotionOptions& options) {
+  options.Validate();
+  const std::vector<std::string> names = robot.JointNames();
+  const double t0 = robot.Time();
+  if (goals.empty()) {
+    MotionResult result;
+    result.reached = true;
+    return result;
+  }
+  // The polyline's vertices and the cumulative length at each.
+  std::vector<Eigen::VectorXd> vertices{robot.PositionTargets()};
+  std::vector<double> at{0.0};
+  for (const auto& goal : goals) {
+    vertices.push_back(Targets(names, vertices.back(), goal, "MoveThrough"));
+    at.push_back(at.back() + (vertices.back() - vertices[vertices.size() - 2]).cwiseAbs().maxCoeff());
+  }
+  const double length = at.back();
+  const double duration = options.duration * static_cast<double>(goals.size());
+  size_t segment = 1;
+  for (double t = options.command_period; t < duration + 1e-9; t += options.command_period) {
+    const double s = length * MinJerk(t / duration);
+    while (segment + 1 < vertices.size() && at[segment] < s) ++segment;
+    const double span = at[segment] - at[segment - 1];
+    const double f = span > 0 ? std::clamp((s - at[segment - 1]) / span, 0.0, 1.0) : 1.0;
+    robot.SetPositionTargets(vertices[segment - 1] + f * (vertices[segment] - vertices[segment - 1]));
+    robot.Wait(options.command_period);
+  }
+  robot.SetPositionTargets(vertices.back());
+  return AwaitArrival(robot, names, options, t0);
 }
 
 }  // namespace toolbench::control

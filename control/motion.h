@@ -2,6 +2,7 @@
 
 #include <map>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -40,5 +41,16 @@ struct MotionResult {
 /// the timeout passes. Throws std::invalid_argument naming an unknown joint or a non-finite goal.
 MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
                         const MotionOptions& options = {});
+
+/// Moves through a sequence of goals (each as MoveJoints takes it: named joints, the others keep
+/// their targets) without stopping at the intermediate ones: the targets run along the
+/// joint-space polyline start -> goals[0] -> ... -> goals.back() with one minimum-jerk time law
+/// over its whole length (segments by their largest joint change), lasting `options.duration`
+/// per goal; then waits for arrival at the last goal as MoveJoints does. Stopping at every IK
+/// waypoint of a straight Cartesian line (and waiting for the encoders there) took about twice
+/// as long for the same peak speed. An empty sequence does nothing (reached, elapsed 0). Throws
+/// std::invalid_argument as MoveJoints does.
+MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::string, double>>& goals,
+                         const MotionOptions& options = {});
 
 }  // namespace toolbench::control

@@ -1,5 +1,7 @@
 #include "control/motion.h"
 
+#include <functional>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -61,6 +63,55 @@ TEST(MotionTest, BadGoalsAreNamed) {
   options.duration = 0;
   EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, options); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("duration")));
+}
+
+TEST(MotionTest, MoveThroughPassesEveryGoalWithoutStopping) {
+  FakeRobot robot(2);
+  MotionOptions options;
+  options.duration = 0.5;  // per goal
+  // An L-shaped path: a first, then b. The targets must pass the corner (0.4, 0).
+  double closest_to_corner = 1e9;
+  double elapsed_at_corner = -1;
+  double speed_at_corner = -1;  // of the targets [rad/s]
+  Eigen::VectorXd previous = Eigen::Vector2d::Zero();
+  class Recorder : public FakeRobot {
+   public:
+    using FakeRobot::FakeRobot;
+    std::function<void(const Eigen::VectorXd&, double)> on_target;
+    void SetPositionTargets(const Eigen::VectorXd& q) override {
+      FakeRobot::SetPositionTargets(q);
+      if (on_target) on_target(q, Time());
+    }
+  } recorder(2);
+  recorder.on_target = [&](const Eigen::VectorXd& q, double t) {
+    const double d = (q - Eigen::Vector2d(0.4, 0.0)).norm();
+    if (d < closest_to_corner) {
+      closest_to_corner = d;
+      elapsed_at_corner = t;
+      speed_at_corner = (q - previous).norm() / options.command_period;
+    }
+    previous = q;
+  };
+  const MotionResult result = MoveThrough(recorder, {{{"a", 0.4}}, {{"b", 0.4}}}, options);
+  EXPECT_TRUE(result.reached);
+  EXPECT_NEAR(recorder.ReadEncoders()[0], 0.4, 0.02);
+  EXPECT_NEAR(recorder.ReadEncoders()[1], 0.4, 0.02);
+  EXPECT_LT(closest_to_corner, 0.02);
+  EXPECT_NEAR(elapsed_at_corner, 0.5, 0.05);  // half the path at half the time (equal segments)
+  // Passing the corner at the minimum-jerk peak speed 1.875 * 0.8 rad / 1 s, not stopping there.
+  EXPECT_NEAR(speed_at_corner, 1.5, 0.1);
+  // One motion of 2 x 0.5 s plus the arrival; stopping at the corner would add its own wait.
+  EXPECT_GE(result.elapsed, 1.0 - 1e-9);
+  EXPECT_LT(result.elapsed, 1.0 + 0.2);
+
+  // Nothing to do: no motion, no time.
+  const MotionResult none = MoveThrough(robot, {}, options);
+  EXPECT_TRUE(none.reached);
+  EXPECT_EQ(none.elapsed, 0.0);
+  EXPECT_THAT([&] { MoveThrough(robot, {{{"a", 0.1}}, {{"wrist", 0.2}}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("MoveThrough: unknown joint 'wrist'")));
+  EXPECT_THAT([&] { MoveThrough(robot, {{{"b", INFINITY}}}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("'b'")));
 }
 
 }  // namespace
