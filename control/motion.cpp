@@ -33,28 +33,32 @@ void MotionOptions::Validate() const {
 namespace {
 
 // The full target vector for `goal` applied over `base` (the joints `goal` does not name keep
-// their value in `base`).
+// their value in `base`); marks the named joints in `moved`.
 Eigen::VectorXd Targets(const std::vector<std::string>& names, Eigen::VectorXd base,
-                        const std::map<std::string, double>& goal, const char* function) {
+                        const std::map<std::string, double>& goal, const char* function,
+                        Eigen::Array<bool, Eigen::Dynamic, 1>& moved) {
   for (const auto& [name, value] : goal) {
     auto it = std::find(names.begin(), names.end(), name);
     if (it == names.end()) ThrowInvalid(function, ": unknown joint '", name, "'");
     if (!std::isfinite(value)) ThrowInvalid(function, ": goal for '", name, "' is ", value);
     base[it - names.begin()] = value;
+    moved[it - names.begin()] = true;
   }
   return base;
 }
 
-// Waits until every joint is within position_tol of its commanded target and slower than
+// Waits until every moved joint is within position_tol of its commanded target and slower than
 // velocity_tol, or the timeout passes; t0 is when the motion began.
 MotionResult AwaitArrival(RobotInterface& robot, const std::vector<std::string>& names,
-                          const MotionOptions& options, double t0) {
+                          const Eigen::Array<bool, Eigen::Dynamic, 1>& moved, const MotionOptions& options,
+                          double t0) {
   MotionResult result;
+  const Eigen::ArrayXd mask = moved.cast<double>();
   const Eigen::VectorXd commanded = robot.PositionTargets();  // after the servo's clamping
   const double deadline = robot.Time() + options.timeout;
   while (true) {
-    const Eigen::VectorXd error = (robot.ReadEncoders() - commanded).cwiseAbs();
-    const double speed = robot.ReadVelocities().cwiseAbs().maxCoeff();
+    const Eigen::ArrayXd error = (robot.ReadEncoders() - commanded).array().abs() * mask;
+    const double speed = (robot.ReadVelocities().array().abs() * mask).maxCoeff();
     Eigen::Index worst = 0;
     result.max_error = error.maxCoeff(&worst);
     result.worst_joint = names[worst];
@@ -76,7 +80,8 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
   options.Validate();
   const std::vector<std::string> names = robot.JointNames();
   const Eigen::VectorXd start = robot.PositionTargets();
-  const Eigen::VectorXd target = Targets(names, start, goal, "MoveJoints");
+  Eigen::Array<bool, Eigen::Dynamic, 1> moved = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(start.size(), false);
+  const Eigen::VectorXd target = Targets(names, start, goal, "MoveJoints", moved);
   const double t0 = robot.Time();
   for (double t = options.command_period; t < options.duration + 1e-9;
        t += options.command_period) {
@@ -84,7 +89,7 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
     robot.Wait(options.command_period);
   }
   robot.SetPositionTargets(target);
-  return AwaitArrival(robot, names, options, t0);
+  return AwaitArrival(robot, names, moved, options, t0);
 }
 
 MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::string, double>>& goals,
@@ -100,8 +105,9 @@ MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::
   // The polyline's vertices and the cumulative length at each.
   std::vector<Eigen::VectorXd> vertices{robot.PositionTargets()};
   std::vector<double> at{0.0};
+  Eigen::Array<bool, Eigen::Dynamic, 1> moved = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(vertices[0].size(), false);
   for (const auto& goal : goals) {
-    vertices.push_back(Targets(names, vertices.back(), goal, "MoveThrough"));
+    vertices.push_back(Targets(names, vertices.back(), goal, "MoveThrough", moved));
     at.push_back(at.back() + (vertices.back() - vertices[vertices.size() - 2]).cwiseAbs().maxCoeff());
   }
   const double length = at.back();
@@ -116,7 +122,7 @@ MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::
     robot.Wait(options.command_period);
   }
   robot.SetPositionTargets(vertices.back());
-  return AwaitArrival(robot, names, options, t0);
+  return AwaitArrival(robot, names, moved, options, t0);
 }
 
 }  // namespace toolbench::control

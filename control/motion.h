@@ -30,15 +30,17 @@ struct MotionOptions {
 
 /// Outcome of a joint motion (an expected failure is a result, not an exception).
 struct MotionResult {
-  bool reached = false;        // all joints within position_tol and still before the timeout
-  double max_error = 0.0;      // largest |q - q_target| at the end [rad]
+  bool reached = false;        // the moved joints within position_tol and still before the timeout
+  double max_error = 0.0;      // largest |q - q_target| of the moved joints at the end [rad]
   std::string worst_joint;     // joint with max_error
   double elapsed = 0.0;        // robot time spent [s]
 };
 
 /// Moves the named joints (others keep their targets) along a minimum-jerk path to `goal`
-/// [rad] by streaming position targets, then waits until the encoders say the motion is done or
-/// the timeout passes. Throws std::invalid_argument naming an unknown joint or a non-finite goal.
+/// [rad] by streaming position targets, then waits until the encoders say the motion of those
+/// joints is done or the timeout passes (a finger squeezing a tool never reaches its target and
+/// must not hold up a gaze or arm motion). Throws std::invalid_argument naming an unknown joint
+/// or a non-finite goal.
 MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
                         const MotionOptions& options = {});
 

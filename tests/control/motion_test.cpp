@@ -15,6 +15,7 @@ using ::testing::ThrowsMessage;
 class FakeRobot : public RobotInterface {
  public:
   explicit FakeRobot(int n) : q_(Eigen::VectorXd::Zero(n)), target_(q_), v_(q_) {}
+  bool a_blocked = false;  // joint "a" cannot move (a finger closed on a handle)
   std::vector<std::string> JointNames() const override { return {"a", "b"}; }
   Eigen::VectorXd ReadEncoders() const override { return q_; }
   Eigen::VectorXd ReadVelocities() const override { return v_; }
@@ -23,6 +24,7 @@ class FakeRobot : public RobotInterface {
   void Wait(double seconds) override {
     for (double t = 0; t < seconds - 1e-12; t += 0.001) {
       v_ = (target_ - q_) / 0.02;
+      if (a_blocked) v_[0] = 0;
       q_ += v_ * 0.001;
       time_ += 0.001;
     }
@@ -51,6 +53,23 @@ TEST(MotionTest, MoveJointsReachesGoalAndKeepsOthers) {
   EXPECT_NEAR(robot.ReadEncoders()[1], 0.5, 0.02);
   EXPECT_NEAR(robot.ReadEncoders()[0], 0.0, 1e-12);
   EXPECT_GE(result.elapsed, 1.5 - 1e-9);
+}
+
+TEST(MotionTest, AJointThatCannotArriveDoesNotHoldUpTheOthers) {
+  FakeRobot robot(2);
+  robot.a_blocked = true;
+  robot.SetPositionTargets(Eigen::Vector2d(0.5, 0.0));  // "a" squeezes: it never gets there
+  MotionOptions options;
+  options.timeout = 2.0;
+  const MotionResult result = MoveJoints(robot, {{"b", 0.5}}, options);
+  EXPECT_TRUE(result.reached);
+  EXPECT_EQ(result.worst_joint, "b");
+  EXPECT_LT(result.elapsed, options.duration + 0.2);
+  // Moving "a" itself does wait, and says which joint is off.
+  const MotionResult stuck = MoveJoints(robot, {{"a", 0.6}}, options);
+  EXPECT_FALSE(stuck.reached);
+  EXPECT_EQ(stuck.worst_joint, "a");
+  EXPECT_NEAR(stuck.elapsed, options.duration + options.timeout, 0.02);
 }
 
 TEST(MotionTest, BadGoalsAreNamed) {
