@@ -90,6 +90,7 @@ class FilmingRobot : public RobotInterface {
       world_.Step(chunk);
       remaining -= chunk;
     }
+    robot_.Wait(0.0);  // throws as SimRobot::Wait does once the physics is unstable
   }
 
  private:

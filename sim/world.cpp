@@ -58,7 +58,9 @@ struct World::Impl {
     if (m) mj_deleteModel(m);
   }
 
-  void CheckWarnings() {
+  // `t_before`: the time before the step (MuJoCo resets the state, time included, when it
+  // finds the step unstable).
+  void CheckWarnings(double t_before) {
     if (!status.ok) return;
     static constexpr int kFatal[] = {mjWARN_BADQPOS, mjWARN_BADQVEL, mjWARN_BADQACC,
                                      mjWARN_BADCTRL};
@@ -66,7 +68,7 @@ struct World::Impl {
       if (d->warning[w].number > 0) {
         status.ok = false;
         status.message = Cat("MuJoCo reported ", mju_warningText(w, d->warning[w].lastinfo),
-                             " at t = ", d->time, " s");
+                             " stepping from t = ", t_before, " s");
         return;
       }
     }
@@ -120,8 +122,9 @@ void World::ResetToKeyframe(std::string_view key) {
 
 SimStatus World::Step(int steps) {
   for (int i = 0; i < steps && impl_->status.ok; ++i) {
+    const double t_before = impl_->d->time;
     mj_step(impl_->m, impl_->d);
-    impl_->CheckWarnings();
+    impl_->CheckWarnings(t_before);
   }
   return impl_->status;
 }

@@ -2,6 +2,7 @@
 
 #include <map>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -101,7 +102,14 @@ class SimRobot : public RobotInterface {
   Eigen::VectorXd ReadVelocities() const override { return world_.JointVelocities(); }
   void SetPositionTargets(const Eigen::VectorXd& q) override { world_.SetJointTargets(q); }
   Eigen::VectorXd PositionTargets() const override { return world_.JointTargets(); }
-  void Wait(double seconds) override { world_.Advance(seconds); }
+  /// Advances the physics. Throws std::runtime_error (naming MuJoCo's warning and the time) once
+  /// the simulation is unstable: its time no longer advances, so a motion waiting for it would
+  /// wait forever. The episode records the exception as the stage's failure; benches record it
+  /// as the case's.
+  void Wait(double seconds) override {
+    world_.Advance(seconds);
+    if (!world_.status().ok) throw std::runtime_error("simulation unstable: " + world_.status().message);
+  }
   double Time() const override { return world_.time(); }
 
  private:

@@ -125,6 +125,19 @@ TEST_F(WorldTest, ServosHoldHomeAgainstGravity) {
   EXPECT_LT(error.maxCoeff(), 1.5 * M_PI / 180.0) << error.transpose();
 }
 
+TEST(SimRobotTest, WaitThrowsOnceThePhysicsIsUnstable) {
+  // A stiff servo on a feather-light link with a coarse step: the integration blows up, MuJoCo
+  // stops advancing time, and a motion waiting for the encoders would wait forever.
+  const std::string mjcf = R"(<mujoco><option timestep="0.01"/><worldbody><body>
+      <joint name="j" type="hinge"/><geom type="capsule" size="0.01 0.1" mass="1e-6"/></body></worldbody>
+      <actuator><position joint="j" kp="1e9"/></actuator></mujoco>)";
+  World world(mjcf, "unstable");
+  SimRobot robot(world);
+  robot.SetPositionTargets(Eigen::VectorXd::Constant(1, 1.0));
+  EXPECT_THAT([&] { robot.Wait(1.0); }, ThrowsMessage<std::runtime_error>(HasSubstr("simulation unstable")));
+  EXPECT_FALSE(world.status().ok);
+}
+
 TEST_F(WorldTest, BadTargetsAreRejected) {
   World world(Compose(1).mjcf, "bad");
   EXPECT_THAT([&] { world.SetJointTargets(Eigen::VectorXd::Zero(2)); },
