@@ -139,7 +139,9 @@ LookResult LookWithNeck(RobotInterface& interface, const robot::RobotDescription
   }
   const Eigen::VectorXd q = ModelQ(robot, interface.JointNames(), interface.PositionTargets());
   result.gaze = control::LookAt(robot, q, p_R_target, options);
-  result.motion = control::MoveJoints(interface, result.gaze.joints);
+  control::MotionOptions motion;
+  motion.duration = 0.8;  // the neck alone: a short, light motion
+  result.motion = control::MoveJoints(interface, result.gaze.joints, motion);
   return result;
 }
 
