@@ -281,8 +281,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       RgbdFrame frame;
       bool converged = false;
       int looks = 0;
+      control::MotionResult motion;
       for (const Eigen::Vector3d& target : targets) {
-        converged = LookAt(robot, desc, target).gaze.converged;
+        const LookResult look = LookAt(robot, desc, target);
+        converged = look.gaze.converged;
+        motion = look.motion;
         frame = see();
         ++looks;
         ball = perception::DetectBall(frame, {});
@@ -293,9 +296,13 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.reason = ball.reason;
       s.details = {{"gaze_converged", converged},
                    {"looks", looks},
+                   {"motion_arrived", motion.reached},
+                   {"motion_worst_joint", motion.worst_joint},
+                   {"motion_error_rad", motion.max_error},
                    {"ball_R", Vec3(ball.p_RB)},
                    {"radius_m", ball.radius}};
       if (!request.out_dir.empty()) cv::imwrite((request.out_dir / image).string(), DrawBall(frame, ball));
+      stage_frame(name);
     });
   };
   if (!observe_table("observe_table", "table.png", {table_target}).ok) return finish();
