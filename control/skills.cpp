@@ -517,7 +517,6 @@ void RequireFinite(const Eigen::Isometry3d& X, const char* function, const char*
   }
 }
 
-
 // Largest joint difference between two postures [rad].
 double JointStep(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
 
