@@ -253,6 +253,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     }
     stage.wall_ms = Ms(start);
     stage.robot_s = robot.Time() - robot_start;
+    // Scoring only (never seen by the robot): where each stage left the ball.
+    result.truth["ball_after_stage_R"][name] =
+        Vec3(X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation());
     result.stages.push_back(stage);
     Progress(request, static_cast<int>(result.stages.size()), result.stages.back());
     if (!stage.ok && result.failure.empty()) result.failure = stage.name + ": " + stage.reason;
@@ -276,14 +279,14 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
   perception::BallDetection ball;
   // Looks at each target in turn until the ball is seen (the last frame is kept as the picture).
   auto observe_table = [&](const std::string& name, const std::string& image,
-                           const std::vector<Eigen::Vector3d>& targets) {
+                           const std::vector<Eigen::Vector3d>& targets, bool arm_down = true) {
     return run_stage(name, [&](StageRecord& s) {
       RgbdFrame frame;
       bool converged = false;
       int looks = 0;
       control::MotionResult motion;
       for (const Eigen::Vector3d& target : targets) {
-        const LookResult look = LookAt(robot, desc, target);
+        const LookResult look = LookAt(robot, desc, target, arm_down);
         converged = look.gaze.converged;
         motion = look.motion;
         frame = see();
@@ -548,12 +551,15 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.ok = p.status == control::PullStatus::kPulled;
       s.outcome = control::ToString(p.status);
       s.reason = p.reason;
-      s.details = {{"planned_drag_m", p.planned_drag_m}, {"action", control::ToString(p.action)}};
+      s.details = {{"planned_drag_m", p.planned_drag_m},
+                   {"planned_lift_m", p.planned_lift_m},
+                   {"action", control::ToString(p.action)}};
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = ball.p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
     });
 
     // ---- 7. Put the tool down on the table, away from the ball. ----
+    bool hand_cleared = false;  // by the put-down stage: the look after it keeps the arm where it is
     run_stage("put_down", [&](StageRecord& s) {
       // Free places on the table, from 10 cm in from its sides to half-way to the middle, on the
       // right hand's side first (the other side was out of reach in 7 of 16 random episodes), at
@@ -573,18 +579,53 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
           }
         }
       }
+      // The tool lies with no point within 8 cm of the ball (where the action should have left
+      // it and where it was last seen) and its centroid on the table, 5 cm in from the edges.
+      control::PutDownOptions put;
+      put.tool_points_T = model->mesh.vertices.cast<double>();
+      put.keep_out_R = {ball_expected_R, ball.p_RB};
+      const Eigen::Vector2d half = spec.table.size / 2 - Eigen::Vector2d::Constant(0.05);
+      put.support_xy = Eigen::AlignedBox2d(spec.table.center - half, spec.table.center + half);
       control::PutDownResult d;
       d.reason = "no free place on the table 20 cm from the ball";
       int tried = 0;
-      for (const Eigen::Vector3d& place : places) {
-        ++tried;
-        d = control::PutDown(robot, desc, X_PT, place, model->handle.radius);
+      // Then, when no place keeps the tool clear of the ball and on the table, anywhere that
+      // plans (a hand still holding the tool cannot grasp the ball).
+      bool checked = true;
+      for (const bool check : {true, false}) {
         if (d.placed) break;
+        checked = check;
+        if (!check) put.tool_points_T.resize(3, 0);
+        for (const Eigen::Vector3d& place : places) {
+          ++tried;
+          d = control::PutDown(robot, desc, X_PT, place, model->handle.radius, put);
+          if (d.placed) break;
+        }
       }
+      // Clear the hand of the table before the look: straight up to 15 cm above it, then (as far
+      // as IK goes) across to above where the observation posture puts the hand, beside the
+      // table. The look then leaves the arm up there: the joint-space move down into the
+      // observation posture swept the hand onto the table top, where it stayed pressed (r_elbow
+      // 1.4 rad short, in every episode), and knocked the ball aside.
+      const double z_clear = spec.table.top_z + 0.15;
+      const Eigen::Vector3d p_palm = PalmPoseFromEncoders(desc, robot).translation();
+      const Eigen::Vector3d p_observe =
+          robot::LinkPose(desc.model, ObservePosture(desc, q_model()), desc.palm_frame).translation();
+      const control::PalmPathResult clear = control::MovePalmThrough(
+          robot, desc,
+          {{p_palm.x(), p_palm.y(), std::max(p_palm.z(), z_clear)},
+           {p_observe.x(), p_observe.y(), std::max(p_observe.z(), z_clear)}});
       s.ok = d.placed;
       s.outcome = d.placed ? "placed" : "failed";
       s.reason = d.reason;
-      s.details = {{"places_tried", tried}, {"place_R", d.placed ? Vec3(d.X_RP.translation()) : nlohmann::json()}};
+      hand_cleared = PalmPoseFromEncoders(desc, robot).translation().z() >= z_clear - 0.03;
+      s.details = {{"places_tried", tried},
+                   {"place_R", d.placed ? Vec3(d.X_RP.translation()) : nlohmann::json()},
+                   {"clear_of_ball_and_on_table", checked},
+                   {"yaws_off_table", d.yaws_off_surface},
+                   {"yaws_near_ball", d.yaws_kept_out},
+                   {"hand_cleared", hand_cleared},
+                   {"clear_reason", clear.reason}};
       stage_frame("put_down");
     });
 
@@ -597,7 +638,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 8. Look again; grasp the ball when it is now in reach. ----
     // Where the action should have left the ball first (the pull brings it close to the robot,
     // below the view of the table's centre), then the table's centre.
-    if (!observe_table("observe_table_again", "table_after.png", {ball_expected_R, table_target}).ok) {
+    if (!observe_table("observe_table_again", "table_after.png", {ball_expected_R, table_target},
+                       /*arm_down=*/!hand_cleared)
+             .ok) {
       return finish();
     }
     bool now_reachable = false;

@@ -108,13 +108,29 @@ Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
   return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);
 }
 
-LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target) {
-  LookResult result;
-  // Gaze starts from the observation posture (torso leaning back a little, for distance).
+namespace {
+
+std::map<std::string, double> ObserveJoints() {
   std::map<std::string, double> observe;
   for (const auto& [joint, deg] : kObservePostureDeg) observe[joint] = deg * M_PI / 180.0;
-  const Eigen::VectorXd q =
-      robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), observe);
+  return observe;
+}
+
+}  // namespace
+
+Eigen::VectorXd ObservePosture(const robot::RobotDescription& robot, const Eigen::VectorXd& q_model) {
+  return robot.WithJoints(q_model, ObserveJoints());
+}
+
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target,
+                  bool arm_down) {
+  LookResult result;
+  // Gaze starts from the observation posture (torso leaning back a little, for distance).
+  std::map<std::string, double> observe = ObserveJoints();
+  if (!arm_down) {
+    for (auto it = observe.begin(); it != observe.end();) it = it->first.rfind("r_", 0) == 0 ? observe.erase(it) : std::next(it);
+  }
+  const Eigen::VectorXd q = robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), observe);
   result.gaze = control::LookAt(robot, q, p_R_target);
   if (!result.gaze.converged) {
     spdlog::warn(

@@ -69,6 +69,10 @@ InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry
 /// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
 
+/// q_model (model q) with the observation posture's joints set: torso leaning back a little, the
+/// right arm down beside it (LookAt's starting posture).
+Eigen::VectorXd ObservePosture(const robot::RobotDescription& robot, const Eigen::VectorXd& q_model);
+
 /// Outcome of turning torso and head toward a point.
 struct LookResult {
   control::GazeResult gaze;
@@ -76,8 +80,12 @@ struct LookResult {
 };
 
 /// Solves gaze for `p_R_target` and moves torso and neck there with a minimum-jerk trajectory
-/// (thesis Fig. 5.4). Never throws for an unreachable gaze: the result says so.
-LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target);
+/// (thesis Fig. 5.4), the right arm into the observation posture at the same time unless
+/// `arm_down` is false (the arm then keeps its targets: e.g. a hand already cleared of the table,
+/// which the joint-space move down would sweep across it). Never throws for an unreachable gaze:
+/// the result says so.
+LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target,
+                  bool arm_down = true);
 
 /// Points the head at `p_R_target` with the neck alone, from the current posture: torso and arms
 /// keep their targets (e.g. to look at a tool held in the hand, which a torso move would carry

@@ -109,12 +109,12 @@ double ChainError(const RobotInterface& robot, const KinematicChain& chain, cons
 
 // Follows joint-space waypoints with the hand targets untouched, without stopping at each
 // (MoveThrough: motion.duration per waypoint).
-void FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
-                     const MotionOptions& motion) {
+MotionResult FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
+                             const MotionOptions& motion) {
   std::vector<std::map<std::string, double>> goals;
   goals.reserve(path.size());
   for (const Eigen::VectorXd& q : path) goals.push_back(ChainGoal(chain, q));
-  MoveThrough(robot, goals, motion);
+  return MoveThrough(robot, goals, motion);
 }
 
 }  // namespace
@@ -611,6 +611,10 @@ void PullOptions::Validate() const {
   if (!(pull_turn_step_rad > 0)) fail("pull_turn_step_rad", pull_turn_step_rad, "> 0");
   if (drag_waypoints < 2) fail("drag_waypoints", drag_waypoints, ">= 2");
   if (lift_waypoints < 1) fail("lift_waypoints", lift_waypoints, ">= 1");
+  if (!(lift_back_m >= 0)) fail("lift_back_m", lift_back_m, ">= 0");
+  if (!(lift_orientation_tolerance_rad >= ik.orientation_tolerance_rad && lift_orientation_tolerance_rad <= M_PI)) {
+    fail("lift_orientation_tolerance_rad", lift_orientation_tolerance_rad, "in [ik.orientation_tolerance_rad, pi]");
+  }
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
   if (!(arm_arrival_tol > 0)) fail("arm_arrival_tol", arm_arrival_tol, "> 0");
   if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
@@ -1103,12 +1107,16 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     Eigen::Isometry3d X_RP_last = X_RP_start;
     X_RP_last.translation() += (options.pull_length_m * drag.size() / options.drag_waypoints) * u;
     Eigen::Isometry3d X_RP_up = X_RP_last;
-    X_RP_up.translation() += options.approach_height_m * up;
+    X_RP_up.translation() += options.approach_height_m * up - options.lift_back_m * u;
     // The lift is cut where IK jumps branch: a large joint step swings the arm and the tool about
     // between two close poses, next to the ball (it flung one off the table). Cutting the
     // descent and the drag there too halved pull-gt's successes (18 -> 12 of 32): they move
     // slowly against the ball, where such steps did no harm.
-    lift = LineWaypoints(solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back(),
+    IkOptions lift_ik = options.ik;
+    lift_ik.orientation_tolerance_rad = options.lift_orientation_tolerance_rad;
+    lift_ik.orientation_length_m = 0.02;  // position first: the palm must rise, it may tilt
+    CartesianSolver lift_solver(chain, drag.back(), lift_ik);
+    lift = LineWaypoints(lift_solver, X_RP_last, X_RP_up, options.lift_waypoints, drag.back(),
                          options.max_joint_step_rad);  // optional
     transfer_failure.clear();
     if (!plan_transfer(above.q, &transfer)) {
@@ -1129,6 +1137,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     drag = std::move(best.drag);
     lift = std::move(best.lift);
     result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
+    result.planned_lift_m = options.approach_height_m * lift.size() / options.lift_waypoints;
     result.X_RT_start = chosen->X_RT;
     result.elevation_rad = chosen->elevation;
     result.yaw_rad = chosen->yaw;
@@ -1220,6 +1229,15 @@ namespace toolbench::control {
 void PutDownOptions::Validate() const {
   if (!(release_height_m >= 0)) ThrowInvalid("PutDownOptions: release_height_m = ", release_height_m, " (expected >= 0)");
   if (!(retreat_up_m >= 0)) ThrowInvalid("PutDownOptions: retreat_up_m = ", retreat_up_m, " (expected >= 0)");
+  if (!(clear_height_m >= 0)) ThrowInvalid("PutDownOptions: clear_height_m = ", clear_height_m, " (expected >= 0)");
+  if (!(keep_out_radius_m >= 0)) {
+    ThrowInvalid("PutDownOptions: keep_out_radius_m = ", keep_out_radius_m, " (expected >= 0)");
+  }
+  if (!tool_points_T.allFinite()) ThrowInvalid("PutDownOptions: tool_points_T holds non-finite points");
+  for (const Eigen::Vector3d& c : keep_out_R) {
+    if (!c.allFinite()) ThrowInvalid("PutDownOptions: keep_out_R holds a non-finite centre");
+  }
+  clear.Validate();
   if (!(settle_time >= 0)) ThrowInvalid("PutDownOptions: settle_time = ", settle_time, " (expected >= 0)");
   transfer.Validate();
   open.Validate();
@@ -1254,6 +1272,22 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     // The grasp centre (handle axis) ends tool_radius + release height above the place.
     const Eigen::Vector3d p_axis = p_R_place + (tool_radius_m + options.release_height_m) * up;
     X_RP.translation() = p_axis - X_RP.linear() * p_grasp_P;
+    if (options.tool_points_T.cols() > 0) {
+      const Eigen::Matrix3Xd points = (X_RP * X_PT) * options.tool_points_T;
+      const Eigen::Vector2d centroid = points.topRows<2>().rowwise().mean();
+      if (!options.support_xy.isEmpty() && !options.support_xy.contains(centroid)) {
+        ++result.yaws_off_surface;
+        continue;
+      }
+      bool near = false;
+      for (const Eigen::Vector3d& c : options.keep_out_R) {
+        near = near || (points.topRows<2>().colwise() - c.head<2>()).colwise().norm().minCoeff() < options.keep_out_radius_m;
+      }
+      if (near) {
+        ++result.yaws_kept_out;
+        continue;
+      }
+    }
     const IkResult low = solver.Solve(X_RP, q_now);
     if (!Converged(low)) continue;
     Eigen::Isometry3d X_above = X_RP;
@@ -1265,6 +1299,14 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     Eigen::Isometry3d X_up = X_RP;
     X_up.translation() += options.retreat_up_m * up;
     const std::vector<Eigen::VectorXd> rise = LineWaypoints(solver, X_RP, X_up, 2, down.back());
+    // Up to clear_height_m above the surface, across at that height to above the place, then
+    // the joint-space turn into the pose above it (as far as the path goes: best effort).
+    const double z_clear = p_R_place.z() + options.clear_height_m;
+    Eigen::Vector3d p_up = X_RP_now.translation();
+    p_up.z() = std::max(p_up.z(), z_clear);
+    Eigen::Vector3d p_over = X_above.translation();
+    p_over.z() = std::max(p_over.z(), z_clear);
+    MovePalmThrough(robot, desc, {p_up, p_over}, options.clear);
     MoveJoints(robot, ChainGoal(chain, above.q), options.transfer);
     MotionOptions step = options.open;
     step.duration = 0.4;
@@ -1277,7 +1319,58 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     result.X_RP = X_RP;
     return result;
   }
-  result.reason = Cat("no palm yaw puts the tool above (", p_R_place.transpose(), ") m in R within reach");
+  result.reason = Cat("no palm yaw puts the tool above (", p_R_place.transpose(), ") m in R within reach (",
+                      result.yaws_off_surface, " of 12 yaws would leave it off the surface, ", result.yaws_kept_out,
+                      " too near a keep-out centre)");
+  return result;
+}
+
+void PalmPathOptions::Validate() const {
+  if (!(step_m > 0)) ThrowInvalid("PalmPathOptions: step_m = ", step_m, " (expected > 0)");
+  if (!(max_joint_step_rad > 0)) {
+    ThrowInvalid("PalmPathOptions: max_joint_step_rad = ", max_joint_step_rad, " (expected > 0)");
+  }
+  waypoint.Validate();
+  ik.Validate();
+}
+
+PalmPathResult MovePalmThrough(RobotInterface& robot, const robot::RobotDescription& desc,
+                               const std::vector<Eigen::Vector3d>& points_R, const PalmPathOptions& options) {
+  options.Validate();
+  for (size_t i = 0; i < points_R.size(); ++i) {
+    if (!points_R[i].allFinite()) ThrowInvalid("MovePalmThrough: points_R[", i, "] is not finite");
+  }
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
+  CartesianSolver solver(chain, q_now, options.ik);
+  Eigen::Isometry3d from = chain.TipPose(q_now);
+  Eigen::VectorXd q = q_now;
+  std::vector<Eigen::VectorXd> path;
+  PalmPathResult result;
+  for (const Eigen::Vector3d& p : points_R) {
+    if ((p - from.translation()).norm() < 1e-3) {  // already there
+      ++result.points_reached;
+      continue;
+    }
+    Eigen::Isometry3d to = from;
+    to.translation() = p;
+    const int n = std::max(1, static_cast<int>(std::ceil((p - from.translation()).norm() / options.step_m)));
+    const std::vector<Eigen::VectorXd> segment = LineWaypoints(solver, from, to, n, q, options.max_joint_step_rad);
+    path.insert(path.end(), segment.begin(), segment.end());
+    if (static_cast<int>(segment.size()) < n) {
+      result.reason = Cat("the palm path to (", p.transpose(), ") m in R stopped after waypoint ", segment.size(),
+                          " of ", n, " (IK did not converge or changed branch)");
+      break;
+    }
+    ++result.points_reached;
+    from = to;
+    q = segment.back();
+  }
+  if (!path.empty()) result.motion = FollowWaypoints(robot, chain, path, options.waypoint);
+  result.complete = result.points_reached == static_cast<int>(points_R.size()) && (path.empty() || result.motion.reached);
+  if (result.reason.empty() && !result.complete) {
+    result.reason = Cat("the arm did not arrive: ", result.motion.worst_joint, " off by ", result.motion.max_error, " rad");
+  }
   return result;
 }
 

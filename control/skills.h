@@ -316,7 +316,15 @@ struct PullOptions {
   double pull_turn_step_rad = 15.0 * M_PI / 180.0;  // > 0
   int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
   int drag_waypoints = 10;    // IK waypoints of the drag, >= 2
-  int lift_waypoints = 2;     // IK waypoints of the lift after the drag, >= 1
+  int lift_waypoints = 4;     // IK waypoints of the lift after the drag, >= 1
+  /// The lift rises approach_height_m and goes this far back along the drag [m], >= 0 (away from
+  /// the object: the drag ends with the arm folded near the body, where a lift straight up was
+  /// often out of reach and left the tool on the table).
+  double lift_back_m = 0.05;
+  /// The lift stays near the drag's last posture and may tilt the palm by up to this much [rad],
+  /// >= ik.orientation_tolerance_rad: the drag often ends at the edge of the workspace, where a
+  /// lift at a fixed orientation was cut short and left the tool on the table.
+  double lift_orientation_tolerance_rad = 0.5;
   MotionOptions transfer{3.0, 0.01, 0.02, 0.05, 0.5};  // the transfer to above the start: duration shared by its waypoints
   MotionOptions waypoint{0.3, 0.01, 0.02, 0.05, 0.1};  // each descent / drag / lift waypoint
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
@@ -362,6 +370,7 @@ struct PullResult {
   Eigen::Vector3d pull_dir_R = Eigen::Vector3d::Zero();    // unit horizontal drag direction used, in R
   double pull_turn_rad = 0.0;    // its turn about z_R from ActionDirection(action, p_RO) [rad]
   double planned_drag_m = 0.0;   // length of the planned drag [m]
+  double planned_lift_m = 0.0;   // height of the planned lift after it [m] (approach_height_m when complete)
   double elevation_rad = 0.0;    // chosen orientation sample (see PullOptions)
   double yaw_rad = 0.0;
   double roll_rad = 0.0;
@@ -429,10 +438,56 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
                       const ToolEffector& effector, const Eigen::Vector3d& p_RO, double object_radius,
                       const PullOptions& options = {});
 
+/// Options of MovePalmThrough.
+struct PalmPathOptions {
+  double step_m = 0.08;             // IK waypoint spacing along each segment [m], > 0
+  double max_joint_step_rad = 0.3;  // largest joint change between waypoints (else IK changed branch) [rad], > 0
+  MotionOptions waypoint{0.25, 0.01, 0.02, 0.05, 0.5};  // per waypoint, streamed (MoveThrough)
+  /// Waypoint solves keep the palm's current orientation loosely (orientation_length_m small:
+  /// position first) and rest at the current posture.
+  IkOptions ik = [] {
+    IkOptions o;
+    o.orientation_tolerance_rad = 1.0;
+    o.orientation_length_m = 0.02;
+    return o;
+  }();
+  void Validate() const;  // throws std::invalid_argument naming the field
+};
+
+/// Outcome of MovePalmThrough.
+struct PalmPathResult {
+  bool complete = false;    // every point planned and the arm arrived at the last one
+  int points_reached = 0;   // points whose segment planned in full
+  std::string reason;       // why not complete
+  MotionResult motion;      // of the streamed path
+};
+
+/// Moves the palm along straight segments from where it is through `points_R` [m, in R], its
+/// orientation held loosely, each IK posture near the last (no branch jumps). Plans first and
+/// moves along the part that planned; a point that does not plan ends the path there (reported,
+/// not thrown). For clearing the hand of a surface before a joint-space move. Throws
+/// std::invalid_argument for bad options or non-finite points.
+PalmPathResult MovePalmThrough(RobotInterface& robot, const robot::RobotDescription& desc,
+                               const std::vector<Eigen::Vector3d>& points_R, const PalmPathOptions& options = {});
+
 /// Options of PutDown.
 struct PutDownOptions {
   double release_height_m = 0.03;  // lowest tool point this far above the surface when the hand opens [m], >= 0
   double retreat_up_m = 0.10;      // the open hand rises this far afterwards [m], >= 0
+  /// Before the transfer the palm rises straight up until it is this far above the surface [m],
+  /// >= 0: a joint-space transfer from low over the table swept the held tool across it (and the
+  /// ball off it, in 7 of 50 random episodes).
+  double clear_height_m = 0.2;
+  PalmPathOptions clear;           // that rise
+  /// The tool's points in T (e.g. its mesh vertices); empty: the checks below are off. Where the
+  /// hand opens, no tool point may lie within keep_out_radius_m [m] (horizontally) of a centre in
+  /// keep_out_R [m, in R] (e.g. the ball: a long tool laid over it knocked it off the table), and
+  /// the points' centroid (about the centre of mass) must lie in support_xy when that is not
+  /// empty (the surface in R's x-y, less a margin), so that the tool stays on the surface.
+  Eigen::Matrix3Xd tool_points_T;
+  std::vector<Eigen::Vector3d> keep_out_R;
+  double keep_out_radius_m = 0.08;
+  Eigen::AlignedBox2d support_xy;
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
   MotionOptions open{0.5, 0.01, 0.02, 0.05, 0.0};
   double settle_time = 0.5;        // wait after opening [s], >= 0
@@ -451,6 +506,8 @@ struct PutDownResult {
   bool placed = false;           // the hand reached the place and opened
   std::string reason;            // why not, when not placed
   Eigen::Isometry3d X_RP = Eigen::Isometry3d::Identity();  // palm pose where the hand opened
+  int yaws_off_surface = 0;      // palm yaws rejected: the tool's centroid off PutDownOptions::support_xy
+  int yaws_kept_out = 0;         // palm yaws rejected: a tool point near a keep-out centre
 };
 
 /// Puts a held tool down: moves the palm so that the tool hangs above `p_R_place` (a free spot on

@@ -215,5 +215,25 @@ TEST(HandOverTest, HandWaitsWhereAskedAndRejectsAPartialPoint) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("receive_at_R")));
 }
 
+TEST(PalmPathTest, RaisesThePalmAndStopsAtAPointOutOfReach) {
+  SettledScene settled("palm path");
+  const LoadedScene& scene = settled.scene;
+  sim::SimRobot& robot = settled.robot;
+  EXPECT_THAT([&] { control::MovePalmThrough(robot, scene.robot, {Eigen::Vector3d(std::nan(""), 0, 0)}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("points_R[0]")));
+  const Eigen::Vector3d p0 = PalmPoseFromEncoders(scene.robot, robot).translation();
+  const Eigen::Vector3d up = p0 + Eigen::Vector3d(0.0, 0.0, 0.1);
+  const Eigen::Vector3d far = up + Eigen::Vector3d(-2.0, 0.0, 0.0);  // 2 m in front: out of reach
+  const control::PalmPathResult r = control::MovePalmThrough(robot, scene.robot, {p0, up, far});
+  EXPECT_FALSE(r.complete);
+  EXPECT_EQ(r.points_reached, 2) << r.reason;
+  EXPECT_THAT(r.reason, HasSubstr("stopped after waypoint"));
+  robot.Wait(0.5);
+  const Eigen::Vector3d p1 = PalmPoseFromEncoders(scene.robot, robot).translation();
+  // The path stops short of the unreachable point: the palm is up, somewhere between.
+  EXPECT_GT(p1.z() - p0.z(), 0.08);
+  EXPECT_LT((p1 - far).norm(), (up - far).norm() + 0.01);
+}
+
 }  // namespace
 }  // namespace toolbench::app
