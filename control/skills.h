@@ -506,15 +506,18 @@ struct PutDownResult {
   bool placed = false;           // the hand reached the place and opened
   std::string reason;            // why not, when not placed
   Eigen::Isometry3d X_RP = Eigen::Isometry3d::Identity();  // palm pose where the hand opened
-  int yaws_off_surface = 0;      // palm yaws rejected: the tool's centroid off PutDownOptions::support_xy
-  int yaws_kept_out = 0;         // palm yaws rejected: a tool point near a keep-out centre
+  int poses_sampled = 0;         // palm poses tried: 12 yaws, x 4 rolls about the handle with tool points
+  int yaws_off_surface = 0;      // palm poses rejected: the tool's centroid off PutDownOptions::support_xy
+  int yaws_kept_out = 0;         // palm poses rejected: a tool point near a keep-out centre
 };
 
 /// Puts a held tool down: moves the palm so that the tool hangs above `p_R_place` (a free spot on
 /// a horizontal surface at height p_R_place.z(), in R) with the tool's handle horizontal, lowered
 /// until its lowest point (tool_radius_m below the handle axis) is release_height_m above the
-/// surface, opens the hand, waits, and lifts the open hand. Tries palm yaws about z_R until IK
-/// converges; when none does, nothing has moved (placed = false, with the reason). Throws
+/// surface, opens the hand, waits, and lifts the open hand. Tries palm yaws about z_R (and, with
+/// PutDownOptions::tool_points_T, rolls about the handle, the tool's lowest point then
+/// release_height_m above the surface) until IK converges; when none does, nothing has moved
+/// (placed = false, with the reason). Throws
 /// std::invalid_argument for bad options or non-finite input.
 PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_PT,
                       const Eigen::Vector3d& p_R_place, double tool_radius_m, const PutDownOptions& options = {});

@@ -390,6 +390,7 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
   w.Line(1, "<option timestep=\"" + Num(spec.physics.timestep) + "\" cone=\"" +
                 spec.physics.cone + "\" impratio=\"" + Num(spec.physics.impratio) +
                 "\" noslip_iterations=\"" + std::to_string(spec.physics.noslip_iterations) +
+                "\" noslip_tolerance=\"" + Num(spec.physics.noslip_tolerance) +
                 "\" integrator=\"Euler\"/>");
   w.Line(1, "<size njmax=\"2000\" nconmax=\"500\"/>");
   // Pinned extent: znear/zfar scale with it (measured.md C.2 #5), so the depth conversion must not

@@ -128,6 +128,7 @@ void SceneSpec::Validate() const {
   Require(physics.impratio >= 1, "physics.impratio", physics.impratio, ">= 1");
   Require(physics.noslip_iterations >= 0, "physics.noslip_iterations", physics.noslip_iterations,
           ">= 0");
+  Require(physics.noslip_tolerance > 0, "physics.noslip_tolerance", physics.noslip_tolerance, "> 0");
   Require(physics.settle_time >= 0 && physics.settle_time <= 10, "physics.settle_time",
           physics.settle_time, "in [0, 10] s");
   if (robot.empty()) ThrowInvalid("SceneSpec: field 'robot' is empty");
@@ -191,6 +192,7 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.String("cone", spec.physics.cone);
     r.Number("impratio", spec.physics.impratio);
     r.Integer("noslip_iterations", spec.physics.noslip_iterations);
+    r.Number("noslip_tolerance", spec.physics.noslip_tolerance);
     r.Number("settle_time", spec.physics.settle_time);
     r.Finish();
   }

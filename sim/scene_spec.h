@@ -61,6 +61,7 @@ struct PhysicsSpec {
   std::string cone = "elliptic";     // "pyramidal" or "elliptic"
   double impratio = 10.0;            // >= 1
   int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
+  double noslip_tolerance = 1e-6;    // > 0; the noslip pass stops below this improvement (MuJoCo's default)
   double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
 };
 

@@ -235,5 +235,33 @@ TEST(PalmPathTest, RaisesThePalmAndStopsAtAPointOutOfReach) {
   EXPECT_LT((p1 - far).norm(), (up - far).norm() + 0.01);
 }
 
+TEST(PutDownTest, RejectsEveryYawThatLaysTheToolOverTheBallOrOffTheTable) {
+  SettledScene settled("put-down checks");
+  const LoadedScene& scene = settled.scene;
+  sim::SimRobot& robot = settled.robot;
+  const Eigen::VectorXd q0 = robot.ReadEncoders();
+  // A 40 cm rod through the palm's grasp centre, along the grasp axis.
+  const Eigen::Isometry3d X_PT = PalmGraspFrame(scene.robot);
+  control::PutDownOptions options;
+  options.tool_points_T.resize(3, 41);
+  for (int i = 0; i <= 40; ++i) options.tool_points_T.col(i) = Eigen::Vector3d(0, 0, -0.2 + 0.01 * i);
+  const Eigen::Vector3d place(-0.3, 0.05, scene.spec.table.top_z);
+  options.keep_out_R = {place + Eigen::Vector3d(0.0, 0.0, 0.05)};  // under the grasp centre itself
+  control::PutDownResult r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
+  EXPECT_FALSE(r.placed);
+  EXPECT_EQ(r.poses_sampled, 48);  // 12 yaws x 4 rolls about the handle
+  EXPECT_EQ(r.yaws_kept_out, 48);
+  EXPECT_THAT(r.reason, HasSubstr("48 too near a keep-out centre"));
+  options.keep_out_R.clear();
+  options.support_xy = Eigen::AlignedBox2d(Eigen::Vector2d(1.0, 1.0), Eigen::Vector2d(1.1, 1.1));  // elsewhere
+  r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
+  EXPECT_FALSE(r.placed);
+  EXPECT_EQ(r.yaws_off_surface, 48);
+  EXPECT_LT((robot.ReadEncoders() - q0).cwiseAbs().maxCoeff(), 1e-6) << "a rejected put-down moved the robot";
+  options.tool_points_T.col(0).x() = std::nan("");
+  EXPECT_THAT([&] { control::PutDown(robot, scene.robot, X_PT, place, 0.01, options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("tool_points_T")));
+}
+
 }  // namespace
 }  // namespace toolbench::app

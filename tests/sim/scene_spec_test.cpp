@@ -24,8 +24,10 @@ TEST(SceneSpecTest, EmptyObjectGivesDefaults) {
 
 TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
-      R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]}})",
+      R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},
+          "physics": {"noslip_tolerance": 1e-4}})",
       "inline");
+  EXPECT_DOUBLE_EQ(spec.physics.noslip_tolerance, 1e-4);
   EXPECT_DOUBLE_EQ(spec.rack.incline_deg, 20);
   EXPECT_DOUBLE_EQ(spec.ball.radius, 0.04);
   EXPECT_EQ(spec.tools.choices, std::vector<std::string>{"hoe_1"});
@@ -42,6 +44,8 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("range.json"), HasSubstr("ball.radius"))));
   EXPECT_THAT([] { ParseSceneSpec(R"({"robot_base": [0, 0]})", "size.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"noslip_tolerance": 0}})", "tol.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.noslip_tolerance")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"cone": "round"}})", "cone.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("round")));
   EXPECT_THAT([] { ParseSceneSpec("[1, 2]", "array.json"); },
