@@ -32,11 +32,14 @@ void MotionOptions::Validate() const {
 
 namespace {
 
+// Which joints a motion moves (the others' arrival is not awaited).
+using JointMask = Eigen::Array<bool, Eigen::Dynamic, 1>;
+
 // The full target vector for `goal` applied over `base` (the joints `goal` does not name keep
 // their value in `base`); marks the named joints in `moved`.
 Eigen::VectorXd Targets(const std::vector<std::string>& names, Eigen::VectorXd base,
                         const std::map<std::string, double>& goal, const char* function,
-                        Eigen::Array<bool, Eigen::Dynamic, 1>& moved) {
+                        JointMask& moved) {
   for (const auto& [name, value] : goal) {
     auto it = std::find(names.begin(), names.end(), name);
     if (it == names.end()) ThrowInvalid(function, ": unknown joint '", name, "'");
@@ -50,7 +53,7 @@ Eigen::VectorXd Targets(const std::vector<std::string>& names, Eigen::VectorXd b
 // Waits until every moved joint is within position_tol of its commanded target and slower than
 // velocity_tol, or the timeout passes; t0 is when the motion began.
 MotionResult AwaitArrival(RobotInterface& robot, const std::vector<std::string>& names,
-                          const Eigen::Array<bool, Eigen::Dynamic, 1>& moved, const MotionOptions& options,
+                          const JointMask& moved, const MotionOptions& options,
                           double t0) {
   MotionResult result;
   const Eigen::ArrayXd mask = moved.cast<double>();
@@ -80,7 +83,7 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
   options.Validate();
   const std::vector<std::string> names = robot.JointNames();
   const Eigen::VectorXd start = robot.PositionTargets();
-  Eigen::Array<bool, Eigen::Dynamic, 1> moved = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(start.size(), false);
+  JointMask moved = JointMask::Constant(start.size(), false);
   const Eigen::VectorXd target = Targets(names, start, goal, "MoveJoints", moved);
   const double t0 = robot.Time();
   for (double t = options.command_period; t < options.duration + 1e-9;
@@ -105,7 +108,7 @@ MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::
   // The polyline's vertices and the cumulative length at each.
   std::vector<Eigen::VectorXd> vertices{robot.PositionTargets()};
   std::vector<double> at{0.0};
-  Eigen::Array<bool, Eigen::Dynamic, 1> moved = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(vertices[0].size(), false);
+  JointMask moved = JointMask::Constant(vertices[0].size(), false);
   for (const auto& goal : goals) {
     vertices.push_back(Targets(names, vertices.back(), goal, "MoveThrough", moved));
     at.push_back(at.back() + (vertices.back() - vertices[vertices.size() - 2]).cwiseAbs().maxCoeff());

