@@ -580,6 +580,7 @@ void PullOptions::Validate() const {
   if (!(clearance_m >= 0)) fail("clearance_m", clearance_m, ">= 0");
   if (!std::isfinite(height_offset_m)) fail("height_offset_m", height_offset_m, "finite");
   if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
+  if (!(max_drag_joint_step_rad > 0)) fail("max_drag_joint_step_rad", max_drag_joint_step_rad, "> 0");
   if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
   if (!(max_complete_plans > 0)) fail("max_complete_plans", max_complete_plans, "> 0");
   if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
@@ -1052,6 +1053,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   struct Best {
     Eigen::VectorXd q_above;
     std::vector<Eigen::VectorXd> transfer, descend, drag, lift;
+    double drag_m = 0.0;
   } best;
   int complete = 0;
   for (const Candidate& c : feasible) {
@@ -1098,20 +1100,28 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
     X_RP_end.translation() += options.pull_length_m * u;
-    drag = LineWaypoints(solver, X_RP_start, X_RP_end, options.drag_waypoints, descend.back());
-    while (!drag.empty() && !left_arm_clear(drag.back())) drag.pop_back();
-    if (static_cast<int>(drag.size()) < min_drag) {
-      last_failure = Cat("drag IK ended after ", drag.size(), " of ", options.drag_waypoints, " waypoints");
+    drag.clear();
+    Eigen::VectorXd q_drag = descend.back();
+    const bool drag_complete = CartesianPath(solver, X_RP_start, X_RP_end, 0.0, 1.0, options.drag_waypoints,
+                                             options.max_drag_joint_step_rad, 2, left_arm_clear, &q_drag, &drag);
+    // How far along the pull the planned drag goes (halved steps make waypoints uneven).
+    const double drag_m = drag_complete ? options.pull_length_m
+                          : drag.empty()
+                              ? 0.0
+                              : std::clamp((chain.TipPose(drag.back()).translation() - X_RP_start.translation()).dot(u),
+                                           0.0, options.pull_length_m);
+    if (drag.size() < 2 || drag_m < options.pull_length_m * min_drag / options.drag_waypoints - 1e-6) {
+      last_failure = Cat("drag IK ended after ", drag_m, " of ", options.pull_length_m, " m");
       continue;
     }
     Eigen::Isometry3d X_RP_last = X_RP_start;
-    X_RP_last.translation() += (options.pull_length_m * drag.size() / options.drag_waypoints) * u;
+    X_RP_last.translation() += drag_m * u;
     Eigen::Isometry3d X_RP_up = X_RP_last;
     X_RP_up.translation() += options.approach_height_m * up - options.lift_back_m * u;
     // The lift is cut where IK jumps branch: a large joint step swings the arm and the tool about
-    // between two close poses, next to the ball (it flung one off the table). Cutting the
-    // descent and the drag there too halved pull-gt's successes (18 -> 12 of 32): they move
-    // slowly against the ball, where such steps did no harm.
+    // between two close poses, next to the ball (it flung one off the table). The drag is cut
+    // only at max_drag_joint_step_rad after halving: cut at the lift's 0.3 rad, unhalved, it
+    // halved pull-gt's successes (18 -> 12 of 32).
     IkOptions lift_ik = options.ik;
     lift_ik.orientation_tolerance_rad = options.lift_orientation_tolerance_rad;
     lift_ik.orientation_length_m = 0.02;  // position first: the palm must rise, it may tilt
@@ -1124,11 +1134,11 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       continue;
     }
     ++complete;
-    if (chosen == nullptr || drag.size() > best.drag.size()) {
-      best = {above.q, transfer, descend, drag, lift};
+    if (chosen == nullptr || drag_m > best.drag_m) {
+      best = {above.q, transfer, descend, drag, lift, drag_m};
       chosen = &c;
     }
-    if (static_cast<int>(drag.size()) == options.drag_waypoints || complete >= options.max_complete_plans) break;
+    if (drag_complete || complete >= options.max_complete_plans) break;
   }
   if (chosen != nullptr) {
     q_above = std::move(best.q_above);
@@ -1136,7 +1146,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     descend = std::move(best.descend);
     drag = std::move(best.drag);
     lift = std::move(best.lift);
-    result.planned_drag_m = options.pull_length_m * drag.size() / options.drag_waypoints;
+    result.planned_drag_m = best.drag_m;
     result.planned_lift_m = options.approach_height_m * lift.size() / options.lift_waypoints;
     result.X_RT_start = chosen->X_RT;
     result.elevation_rad = chosen->elevation;

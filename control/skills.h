@@ -316,6 +316,12 @@ struct PullOptions {
   double pull_turn_step_rad = 15.0 * M_PI / 180.0;  // > 0
   int descend_waypoints = 3;  // IK waypoints of the straight descent to the start, >= 1
   int drag_waypoints = 10;    // IK waypoints of the drag, >= 2
+  /// Consecutive drag postures may differ by at most this much in any joint [rad], > 0; a larger
+  /// step is halved up to twice, and the drag ends before a step that stays larger (IK changed
+  /// branch: the wrist flipped the tool over, next to the object, and flung it off the table).
+  /// Wider than max_joint_step_rad: a drag moves slowly against the object, where steps of up to
+  /// 0.45 rad are common and harmless (0.3 without halving halved pull-gt's successes).
+  double max_drag_joint_step_rad = 0.6;
   int lift_waypoints = 4;     // IK waypoints of the lift after the drag, >= 1
   /// The lift rises approach_height_m and goes this far back along the drag [m], >= 0 (away from
   /// the object: the drag ends with the arm folded near the body, where a lift straight up was
