@@ -91,7 +91,6 @@ void PullCaseOptions::Validate() const {
   if (!(ball_y_range.allFinite() && ball_y_range[0] <= ball_y_range[1])) {
     ThrowInvalid("PullCaseOptions: ball_y_range = (", ball_y_range.transpose(), ") (expected finite lo <= hi)");
   }
-  if (!put_down_R.allFinite()) ThrowInvalid("PullCaseOptions: put_down_R is not finite");
   grasp.Validate();
   pull.Validate();
   put_down.Validate();
@@ -232,9 +231,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   if (!options.put_down_and_grasp_ball || out.pull.status == control::PullStatus::kLostTool) return finish(reason);
 
   // 3. Put the tool down at a free place on the table, then grasp the ball if it is in reach.
-  const Eigen::Vector3d p_place(options.put_down_R.x(), options.put_down_R.y(), scene.spec.table.top_z);
-  const double tool_radius = std::max(model->handle.radius, model->effector.radius + model->effector.length / 2);
-  out.put_down = control::PutDown(robot, scene.robot, X_PT, p_place, tool_radius, options.put_down).placed;
+  out.put_down = PutDownOnTable(robot, scene.robot, scene.spec, X_PT, *model, {ball_R()}, options.put_down).put.placed;
   frame("3_put_down");
   if (out.ball_in_reach && out.put_down) {
     out.ball_grasp_tried = true;

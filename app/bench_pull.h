@@ -24,10 +24,10 @@ struct PullCaseOptions {
   Eigen::Vector2d ball_y_range{-0.10, 0.05};
   double settle_after_s = 1.0;      // wait after the pull before measuring the ball [s], > 0
   double min_lift_m = 0.05;         // the grasp must lift the tool this far (grasp-gt criterion) [m], > 0
-  /// After the pull: put the tool down on the table at put_down_R (x, y in R; z = table top) and,
+  /// After the pull: put the tool down on the table away from the ball as the episode does
+  /// (PutDownOnTable, keeping out of where the ball really is: this bench isolates control) and,
   /// when the ball is in reach, grasp it (success = ball >= ball_lift_m above the table, held).
   bool put_down_and_grasp_ball = true;
-  Eigen::Vector2d put_down_R{-0.30, -0.30};
   double ball_lift_m = 0.03;        // [m], > 0
   /// After the grasp, look at the tool in the hand and plan the pull with the pose seen there
   /// (InspectHeldTool); false: with the pose the grasp planned (the tool pivots in the grip as

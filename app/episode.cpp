@@ -578,83 +578,23 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 8. Put the tool down on the table, away from the ball. ----
     bool hand_cleared = false;  // by the put-down stage: the look after it keeps the arm where it is
     run_stage("put_down", [&](StageRecord& s) {
-      // Free places on the table, from 10 cm in from its sides to half-way to the middle, on the
-      // right hand's side first (the other side was out of reach in 7 of 16 random episodes), at
-      // least 20 cm from where the ball should be; a place that does not plan has not moved the
-      // arm. (With the four places at the sides only, none was reachable in 3 of 50 episodes,
-      // and the robot then went for the ball with the tool still in its hand.)
-      const double x_near = spec.table.center.x() + spec.table.size.x() / 2 - 0.12;
-      const double y_side = spec.table.size.y() / 2 - 0.1;
-      std::vector<Eigen::Vector3d> places;
-      for (const double side : {1.0, -1.0}) {
-        for (const double y_fraction : {1.0, 0.5}) {
-          for (const double x : {x_near, spec.table.center.x()}) {
-            const Eigen::Vector3d p(x, spec.table.center.y() + side * y_fraction * y_side, spec.table.top_z);
-            if (Eigen::Vector2d(p.x() - ball_expected_R.x(), p.y() - ball_expected_R.y()).norm() >= 0.2) {
-              places.push_back(p);
-            }
-          }
-        }
-      }
-      // Then a 5 x 5 grid over the table, 8 cm in from its edges, at least 15 cm from the ball
-      // (with the places above alone, none planned in 7 of 50 random episodes).
-      for (int i = 0; i < 5; ++i) {
-        for (int j = 0; j < 5; ++j) {
-          const Eigen::Vector2d inner = spec.table.size / 2 - Eigen::Vector2d::Constant(0.08);
-          const Eigen::Vector2d xy = spec.table.center + Eigen::Vector2d((i / 2.0 - 1.0) * inner.x(),
-                                                                         (j / 2.0 - 1.0) * inner.y());
-          if ((xy - ball_expected_R.head<2>()).norm() >= 0.15) places.emplace_back(xy.x(), xy.y(), spec.table.top_z);
-        }
-      }
-      // The tool lies with no point within 8 cm of the ball (where it was just seen, else where
-      // the action should have left it and where it was) and its centroid on the table, 5 cm in
-      // from the edges.
-      control::PutDownOptions put;
-      put.tool_points_T = model->mesh.vertices.cast<double>();
-      put.keep_out_R = {ball_expected_R};
-      if (!ball_located) put.keep_out_R.push_back(ball.p_RB);
-      const Eigen::Vector2d half = spec.table.size / 2 - Eigen::Vector2d::Constant(0.05);
-      put.support_xy = Eigen::AlignedBox2d(spec.table.center - half, spec.table.center + half);
-      control::PutDownResult d;
-      d.reason = "no free place on the table 15 cm from the ball";
-      int tried = 0;
-      // Then, when no place keeps the tool clear of the ball and on the table, anywhere that
-      // plans (a hand still holding the tool cannot grasp the ball).
-      bool checked = true;
-      for (const bool check : {true, false}) {
-        if (d.placed) break;
-        checked = check;
-        if (!check) put.tool_points_T.resize(3, 0);
-        for (const Eigen::Vector3d& place : places) {
-          ++tried;
-          d = control::PutDown(robot, desc, X_PT, place, model->handle.radius, put);
-          if (d.placed) break;
-        }
-      }
-      // Clear the hand of the table before the look: straight up to 15 cm above it, then (as far
-      // as IK goes) across to above where the observation posture puts the hand, beside the
-      // table. The look then leaves the arm up there: the joint-space move down into the
-      // observation posture swept the hand onto the table top, where it stayed pressed (r_elbow
-      // 1.4 rad short, in every episode), and knocked the ball aside.
-      const double z_clear = spec.table.top_z + 0.15;
-      const Eigen::Vector3d p_palm = PalmPoseFromEncoders(desc, robot).translation();
-      const Eigen::Vector3d p_observe =
-          robot::LinkPose(desc.model, ObservePosture(desc, q_model()), desc.palm_frame).translation();
-      const control::PalmPathResult clear = control::MovePalmThrough(
-          robot, desc,
-          {{p_palm.x(), p_palm.y(), std::max(p_palm.z(), z_clear)},
-           {p_observe.x(), p_observe.y(), std::max(p_observe.z(), z_clear)}});
+      // Away from where the ball was just seen, else from where the action should have left it
+      // and where it was.
+      std::vector<Eigen::Vector3d> ball_R{ball_expected_R};
+      if (!ball_located) ball_R.push_back(ball.p_RB);
+      const TablePutDown put = PutDownOnTable(robot, desc, spec, X_PT, *model, ball_R);
+      const control::PutDownResult& d = put.put;
       s.ok = d.placed;
       s.outcome = d.placed ? "placed" : "failed";
       s.reason = d.reason;
-      hand_cleared = PalmPoseFromEncoders(desc, robot).translation().z() >= z_clear - 0.03;
-      s.details = {{"places_tried", tried},
+      hand_cleared = put.hand_cleared;
+      s.details = {{"places_tried", put.places_tried},
                    {"place_R", d.placed ? Vec3(d.X_RP.translation()) : nlohmann::json()},
-                   {"clear_of_ball_and_on_table", checked},
+                   {"clear_of_ball_and_on_table", put.clear_of_ball},
                    {"yaws_off_table", d.yaws_off_surface},
                    {"yaws_near_ball", d.yaws_kept_out},
                    {"hand_cleared", hand_cleared},
-                   {"clear_reason", clear.reason}};
+                   {"clear_reason", put.clear_reason}};
       stage_frame("put_down");
     });
 

@@ -121,4 +121,29 @@ Eigen::Isometry3d ChokedHandleFrame(const robot::RobotDescription& desc, const E
 /// handle axis (the grasp skills' convention; the rotation about z_H is the shortest turn from z_T).
 Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);
 
+/// What PutDownOnTable did.
+struct TablePutDown {
+  control::PutDownResult put;  // the last place tried (placed or not)
+  int places_tried = 0;
+  bool clear_of_ball = true;   // placed on the first pass: the tool clear of the ball and on the table
+  bool hand_cleared = false;   // the palm ended within 3 cm of 15 cm above the table, or higher
+  std::string clear_reason;    // why the clearing path stopped short ("" = it went all the way)
+};
+
+/// Puts the tool held as X_PT down on the scene's table, away from the ball, and clears the hand
+/// of the table. Places: 8 fixed ones (10 cm in from the table's sides and half-way to the middle,
+/// near and middle rows, the right hand's side first) at least 20 cm from ball_R[0], then a 5 x 5
+/// grid 8 cm in from the edges at least 15 cm from it; each with control::PutDown, keeping every
+/// point of the model's mesh 8 cm from every ball_R (base.keep_out_radius_m) and the tool's
+/// centroid 5 cm inside the table. When no place passes, the places again without those checks
+/// (a hand still holding the tool cannot grasp the ball). Then the open hand rises to 15 cm above
+/// the table and crosses, as far as IK goes, to above where the observation posture puts it: the
+/// joint-space move into that posture had swept the hand across the table top. ball_R: where the
+/// ball is or should be, in R, at least one. Throws as control::PutDown does, and
+/// std::invalid_argument for an empty or non-finite ball_R.
+TablePutDown PutDownOnTable(RobotInterface& robot, const robot::RobotDescription& desc, const sim::SceneSpec& spec,
+                            const Eigen::Isometry3d& X_PT, const toollib::ToolModel& model,
+                            const std::vector<Eigen::Vector3d>& ball_R,
+                            const control::PutDownOptions& base = control::PutDownOptions());
+
 }  // namespace toolbench::app
