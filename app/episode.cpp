@@ -525,7 +525,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details = {{"gaze_converged", view.gaze_converged}, {"segments", e.segments},
                    {"points", e.points},      {"fit_error_m", e.fit_error_m},
                    {"correction_deg", e.correction_deg}, {"correction_m", e.correction_m},
-                   {"axis_offset_m", e.axis_offset_m},
+                   {"axis_offset_m", e.axis_offset_m},      {"slide_corrected_m", e.slide_corrected_m},
                    {"plan_error_deg_truth", plan_error.rotation_deg},
                    {"plan_effector_error_m_truth", plan_error.effector_m},
                    {"used_error_deg_truth", used_error.rotation_deg},
@@ -593,6 +593,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"clear_of_ball_and_on_table", put.clear_of_ball},
                    {"yaws_off_table", d.yaws_off_surface},
                    {"yaws_near_ball", d.yaws_kept_out},
+                   {"paths_near_ball", d.paths_kept_out},
                    {"hand_cleared", hand_cleared},
                    {"clear_reason", put.clear_reason}};
       stage_frame("put_down");

@@ -571,6 +571,46 @@ bool CartesianPath(CartesianSolver& solver, const Eigen::Isometry3d& from, const
   return true;
 }
 
+// The planning half of MovePalmThrough: IK postures of straight palm segments from q_now through
+// points_R, the palm's orientation held loosely, each posture near the last; stops at the first
+// point that does not plan (reason set).
+struct PalmPath {
+  std::vector<Eigen::VectorXd> path;
+  int points_reached = 0;
+  std::string reason;
+};
+
+PalmPath PlanPalmPath(const KinematicChain& chain, const Eigen::VectorXd& q_now,
+                      const std::vector<Eigen::Vector3d>& points_R, const PalmPathOptions& options) {
+  for (size_t i = 0; i < points_R.size(); ++i) {
+    if (!points_R[i].allFinite()) ThrowInvalid("MovePalmThrough: points_R[", i, "] is not finite");
+  }
+  CartesianSolver solver(chain, q_now, options.ik);
+  Eigen::Isometry3d from = chain.TipPose(q_now);
+  Eigen::VectorXd q = q_now;
+  PalmPath out;
+  for (const Eigen::Vector3d& p : points_R) {
+    if ((p - from.translation()).norm() < 1e-3) {  // already there
+      ++out.points_reached;
+      continue;
+    }
+    Eigen::Isometry3d to = from;
+    to.translation() = p;
+    const int n = std::max(1, static_cast<int>(std::ceil((p - from.translation()).norm() / options.step_m)));
+    const std::vector<Eigen::VectorXd> segment = LineWaypoints(solver, from, to, n, q, options.max_joint_step_rad);
+    out.path.insert(out.path.end(), segment.begin(), segment.end());
+    if (static_cast<int>(segment.size()) < n) {
+      out.reason = Cat("the palm path to (", p.transpose(), ") m in R stopped after waypoint ", segment.size(), " of ",
+                       n, " (IK did not converge or changed branch)");
+      break;
+    }
+    ++out.points_reached;
+    from = to;
+    q = segment.back();
+  }
+  return out;
+}
+
 }  // namespace
 
 void PullOptions::Validate() const {
@@ -1282,6 +1322,25 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   const std::vector<double> rolls = have_points ? std::vector<double>{0.0, M_PI / 2, -M_PI / 2, M_PI} : std::vector<double>{0.0};
   const int yaws = 12;
   result.poses_sampled = yaws * static_cast<int>(rolls.size());
+  // Every 8th tool point, checked along the way to the place: below keep_out_radius_m above a
+  // keep-out centre, no point may come within keep_out_radius_m of it horizontally.
+  Eigen::Matrix3Xd keep_out_points(3, 0);
+  if (have_points && !options.keep_out_R.empty()) {
+    keep_out_points.resize(3, (options.tool_points_T.cols() + 7) / 8);
+    for (Eigen::Index i = 0; i < keep_out_points.cols(); ++i) keep_out_points.col(i) = options.tool_points_T.col(8 * i);
+  }
+  auto tool_clear = [&](const Eigen::VectorXd& q) {
+    const Eigen::Matrix3Xd points = (chain.TipPose(q) * X_PT) * keep_out_points;
+    for (const Eigen::Vector3d& c : options.keep_out_R) {
+      for (Eigen::Index i = 0; i < points.cols(); ++i) {
+        if (points(2, i) < c.z() + options.keep_out_radius_m &&
+            Eigen::Vector2d(points(0, i) - c.x(), points(1, i) - c.y()).norm() < options.keep_out_radius_m) {
+          return false;
+        }
+      }
+    }
+    return true;
+  };
   for (int n = 0; n < result.poses_sampled; ++n) {
     const int k = n % yaws;
     const double roll = rolls[static_cast<size_t>(n / yaws)];
@@ -1326,7 +1385,21 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     p_up.z() = std::max(p_up.z(), z_clear);
     Eigen::Vector3d p_over = X_above.translation();
     p_over.z() = std::max(p_over.z(), z_clear);
-    MovePalmThrough(robot, desc, {p_up, p_over}, options.clear);
+    const PalmPath crossing = PlanPalmPath(chain, q_now, {p_up, p_over}, options.clear);
+    if (keep_out_points.cols() > 0) {
+      // The whole way, not only its ends, keeps the tool off the keep-out centres: a long tool
+      // hanging from the hand swept down through the ball in the joint-space turn (episode/18).
+      bool clear = std::all_of(crossing.path.begin(), crossing.path.end(), tool_clear) &&
+                   std::all_of(down.begin(), down.end(), tool_clear);
+      const Eigen::VectorXd& q_over = crossing.path.empty() ? q_now : crossing.path.back();
+      const int n = std::max(2, static_cast<int>(std::ceil(JointStep(q_over, above.q) / 0.05)));
+      for (int i = 1; clear && i < n; ++i) clear = tool_clear(q_over + (static_cast<double>(i) / n) * (above.q - q_over));
+      if (!clear) {
+        ++result.paths_kept_out;
+        continue;
+      }
+    }
+    if (!crossing.path.empty()) FollowWaypoints(robot, chain, crossing.path, options.clear.waypoint);
     MoveJoints(robot, ChainGoal(chain, above.q), options.transfer);
     MotionOptions step = options.open;
     step.duration = 0.4;
@@ -1346,7 +1419,8 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   }
   result.reason = Cat("no palm yaw puts the tool above (", p_R_place.transpose(), ") m in R within reach (",
                       result.yaws_off_surface, " of ", result.poses_sampled, " palm poses would leave it off the surface, ",
-                      result.yaws_kept_out, " too near a keep-out centre)");
+                      result.yaws_kept_out, " too near a keep-out centre, ", result.paths_kept_out,
+                      " with a way there that passes one)");
   return result;
 }
 
@@ -1362,37 +1436,14 @@ void PalmPathOptions::Validate() const {
 PalmPathResult MovePalmThrough(RobotInterface& robot, const robot::RobotDescription& desc,
                                const std::vector<Eigen::Vector3d>& points_R, const PalmPathOptions& options) {
   options.Validate();
-  for (size_t i = 0; i < points_R.size(); ++i) {
-    if (!points_R[i].allFinite()) ThrowInvalid("MovePalmThrough: points_R[", i, "] is not finite");
-  }
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
-  const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
-  CartesianSolver solver(chain, q_now, options.ik);
-  Eigen::Isometry3d from = chain.TipPose(q_now);
-  Eigen::VectorXd q = q_now;
-  std::vector<Eigen::VectorXd> path;
+  PalmPath planned = PlanPalmPath(chain, ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders()), points_R, options);
   PalmPathResult result;
-  for (const Eigen::Vector3d& p : points_R) {
-    if ((p - from.translation()).norm() < 1e-3) {  // already there
-      ++result.points_reached;
-      continue;
-    }
-    Eigen::Isometry3d to = from;
-    to.translation() = p;
-    const int n = std::max(1, static_cast<int>(std::ceil((p - from.translation()).norm() / options.step_m)));
-    const std::vector<Eigen::VectorXd> segment = LineWaypoints(solver, from, to, n, q, options.max_joint_step_rad);
-    path.insert(path.end(), segment.begin(), segment.end());
-    if (static_cast<int>(segment.size()) < n) {
-      result.reason = Cat("the palm path to (", p.transpose(), ") m in R stopped after waypoint ", segment.size(),
-                          " of ", n, " (IK did not converge or changed branch)");
-      break;
-    }
-    ++result.points_reached;
-    from = to;
-    q = segment.back();
-  }
-  if (!path.empty()) result.motion = FollowWaypoints(robot, chain, path, options.waypoint);
-  result.complete = result.points_reached == static_cast<int>(points_R.size()) && (path.empty() || result.motion.reached);
+  result.points_reached = planned.points_reached;
+  result.reason = std::move(planned.reason);
+  if (!planned.path.empty()) result.motion = FollowWaypoints(robot, chain, planned.path, options.waypoint);
+  result.complete = result.points_reached == static_cast<int>(points_R.size()) &&
+                    (planned.path.empty() || result.motion.reached);
   if (result.reason.empty() && !result.complete) {
     result.reason = Cat("the arm did not arrive: ", result.motion.worst_joint, " off by ", result.motion.max_error, " rad");
   }

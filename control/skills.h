@@ -489,7 +489,10 @@ struct PutDownOptions {
   /// hand opens, no tool point may lie within keep_out_radius_m [m] (horizontally) of a centre in
   /// keep_out_R [m, in R] (e.g. the ball: a long tool laid over it knocked it off the table), and
   /// the points' centroid (about the centre of mass) must lie in support_xy when that is not
-  /// empty (the surface in R's x-y, less a margin), so that the tool stays on the surface.
+  /// empty (the surface in R's x-y, less a margin), so that the tool stays on the surface. On the
+  /// way there (the rise, the crossing, the joint-space turn sampled every 0.05 rad and the
+  /// descent), no tool point lower than keep_out_radius_m above a centre may come within
+  /// keep_out_radius_m of it horizontally (every 8th point is checked).
   Eigen::Matrix3Xd tool_points_T;
   std::vector<Eigen::Vector3d> keep_out_R;
   double keep_out_radius_m = 0.08;
@@ -515,6 +518,7 @@ struct PutDownResult {
   int poses_sampled = 0;         // palm poses tried: 12 yaws, x 4 rolls about the handle with tool points
   int yaws_off_surface = 0;      // palm poses rejected: the tool's centroid off PutDownOptions::support_xy
   int yaws_kept_out = 0;         // palm poses rejected: a tool point near a keep-out centre
+  int paths_kept_out = 0;        // palm poses rejected: the way there brings a tool point near one
 };
 
 /// Puts a held tool down: moves the palm so that the tool hangs above `p_R_place` (a free spot on

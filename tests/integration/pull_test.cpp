@@ -263,5 +263,31 @@ TEST(PutDownTest, RejectsEveryYawThatLaysTheToolOverTheBallOrOffTheTable) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("tool_points_T")));
 }
 
+TEST(PutDownTest, RejectsAWayThereThatSweepsTheToolThroughTheBall) {
+  SettledScene settled("put-down path check");
+  const LoadedScene& scene = settled.scene;
+  sim::SimRobot& robot = settled.robot;
+  const Eigen::VectorXd q0 = robot.ReadEncoders();
+  const Eigen::Isometry3d X_PT = PalmGraspFrame(scene.robot);
+  control::PutDownOptions options;
+  options.tool_points_T.resize(3, 41);
+  for (int i = 0; i <= 40; ++i) options.tool_points_T.col(i) = Eigen::Vector3d(0, 0, -0.2 + 0.01 * i);
+  const Eigen::Vector3d place(-0.4, -0.15, scene.spec.table.top_z);
+  // The keep-out centre where the held rod is now, far from the place: the tool lies clear of it
+  // at the place for some yaws, but every way there starts through it.
+  const Eigen::Vector3d rod_now = (PalmPoseFromEncoders(scene.robot, robot) * X_PT).translation();
+  ASSERT_GT((rod_now.head<2>() - place.head<2>()).norm(), 0.3) << rod_now.transpose();
+  options.keep_out_R = {rod_now};
+  const control::PutDownResult r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
+  EXPECT_FALSE(r.placed);
+  EXPECT_GT(r.paths_kept_out, 0);
+  EXPECT_LT(r.yaws_kept_out, r.poses_sampled);
+  EXPECT_THAT(r.reason, HasSubstr("with a way there that passes one"));
+  EXPECT_LT((robot.ReadEncoders() - q0).cwiseAbs().maxCoeff(), 1e-6) << "a rejected put-down moved the robot";
+  // Without the keep-out centre the same put-down places the rod.
+  options.keep_out_R.clear();
+  EXPECT_TRUE(control::PutDown(robot, scene.robot, X_PT, place, 0.01, options).placed);
+}
+
 }  // namespace
 }  // namespace toolbench::app
