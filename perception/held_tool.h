@@ -61,6 +61,9 @@ struct HeldToolEstimate {
   double correction_deg = 0.0;    // rotation from the prior to the estimate [deg]
   double correction_m = 0.0;      // displacement of the tool origin from the prior [m]
   double axis_offset_m = 0.0;     // distance of the grasp centre from the fitted handle axis [m]
+  /// How far the fit had slid the tool along its handle axis past the hand, undone [m] (0 = the
+  /// grasp centre lay on the handle: within its half-length plus max_axis_offset_m of its centre).
+  double slide_corrected_m = 0.0;
   cv::Mat mask;                   // union of the held tool's segments (CV_8UC1), for pictures
 };
 

@@ -109,6 +109,28 @@ TEST(EstimateHeldTool, RejectsACorrectionBeyondItsLimit) {
   EXPECT_THAT(e.reason, HasSubstr("turns the tool by"));
 }
 
+TEST(EstimateHeldTool, PutsTheHandBackOnTheHandleWhenTheFitHasItBeyondTheEnd) {
+  // A stick held at its far end, 20 cm from the handle's centre along the axis (beyond the
+  // handle's half-length 13.5 cm plus max_axis_offset_m): the view cannot say where along a
+  // stick the hand is, the grasp can. The prior has the hand at the handle's centre.
+  const toollib::ToolModel stick = toollib::LoadToolModel(AssetsDir() / "tools" / "stick_1.json");
+  const HeldScene scene;  // its pose across the view
+  const Eigen::Vector3d a = scene.X_RT.linear() * stick.handle.axis;
+  const Eigen::Vector3d p_R_grasp = scene.X_RT * stick.handle.center + 0.2 * a;
+  Eigen::Isometry3d prior = scene.X_RT;
+  prior.translation() += 0.2 * a;
+  const RgbdFrame frame = RenderTool(stick, scene.X_RT);
+  const HeldToolEstimate e = EstimateHeldTool(frame, stick, prior, p_R_grasp);
+  ASSERT_TRUE(e.ok) << e.reason;
+  EXPECT_NEAR(e.slide_corrected_m, 0.2, 0.01) << "the fit found the stick where it is, the hand beyond its handle";
+  EXPECT_NEAR((p_R_grasp - e.X_RT * stick.handle.center).dot(a), 0.0, 0.01);
+  EXPECT_LT(AngleDeg(e.X_RT, scene.X_RT), 2.0);
+  // Held on its handle, nothing is put back.
+  const HeldToolEstimate on_handle = EstimateHeldTool(frame, stick, scene.X_RT, scene.X_RT * stick.handle.center);
+  ASSERT_TRUE(on_handle.ok) << on_handle.reason;
+  EXPECT_EQ(on_handle.slide_corrected_m, 0.0);
+}
+
 TEST(EstimateHeldTool, RejectsBadInput) {
   const HeldScene scene;
   const RgbdFrame frame = RenderTool(scene.tool, scene.X_RT);
