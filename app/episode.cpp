@@ -432,11 +432,17 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     }
     TOOLBENCH_DEMAND(model != nullptr);
 
-    // Which simulated tool the robot went for: for scoring and the hand-over only.
+    // Which simulated tool the robot went for: for scoring and the hand-over only. The one whose
+    // true handle centre is nearest the perceived one (tool origins mislead: a stick fitted end
+    // over end has its origin 35 cm away, nearer another tool's).
     std::string tool_body;
     double nearest = 1e9;
     for (const auto& placed : scene.composed.tools) {
-      const double d = ((X_RW * world.ground_truth().Pose(placed.body)).translation() - tool.X_RT.translation()).norm();
+      const auto placed_model = std::find_if(scene.library.begin(), scene.library.end(),
+                                             [&](const toollib::ToolModel& m) { return m.name == placed.name; });
+      TOOLBENCH_DEMAND(placed_model != scene.library.end());
+      const Eigen::Vector3d handle_R = X_RW * world.ground_truth().Pose(placed.body) * placed_model->handle.center;
+      const double d = (handle_R - tool.handle.center).norm();
       if (d < nearest) {
         nearest = d;
         tool_body = placed.body;
