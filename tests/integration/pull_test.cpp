@@ -235,16 +235,22 @@ TEST(PalmPathTest, RaisesThePalmAndStopsAtAPointOutOfReach) {
   EXPECT_LT((p1 - far).norm(), (up - far).norm() + 0.01);
 }
 
+// A 40 cm rod's points in T, along z_T through its origin: held with X_PT = PalmGraspFrame, it
+// runs through the palm's grasp centre along the grasp axis.
+Eigen::Matrix3Xd RodPoints() {
+  Eigen::Matrix3Xd points(3, 41);
+  for (int i = 0; i <= 40; ++i) points.col(i) = Eigen::Vector3d(0, 0, -0.2 + 0.01 * i);
+  return points;
+}
+
 TEST(PutDownTest, RejectsEveryYawThatLaysTheToolOverTheBallOrOffTheTable) {
   SettledScene settled("put-down checks");
   const LoadedScene& scene = settled.scene;
   sim::SimRobot& robot = settled.robot;
   const Eigen::VectorXd q0 = robot.ReadEncoders();
-  // A 40 cm rod through the palm's grasp centre, along the grasp axis.
   const Eigen::Isometry3d X_PT = PalmGraspFrame(scene.robot);
   control::PutDownOptions options;
-  options.tool_points_T.resize(3, 41);
-  for (int i = 0; i <= 40; ++i) options.tool_points_T.col(i) = Eigen::Vector3d(0, 0, -0.2 + 0.01 * i);
+  options.tool_points_T = RodPoints();
   const Eigen::Vector3d place(-0.3, 0.05, scene.spec.table.top_z);
   options.keep_out_R = {place + Eigen::Vector3d(0.0, 0.0, 0.05)};  // under the grasp centre itself
   control::PutDownResult r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
@@ -270,8 +276,7 @@ TEST(PutDownTest, RejectsAWayThereThatSweepsTheToolThroughTheBall) {
   const Eigen::VectorXd q0 = robot.ReadEncoders();
   const Eigen::Isometry3d X_PT = PalmGraspFrame(scene.robot);
   control::PutDownOptions options;
-  options.tool_points_T.resize(3, 41);
-  for (int i = 0; i <= 40; ++i) options.tool_points_T.col(i) = Eigen::Vector3d(0, 0, -0.2 + 0.01 * i);
+  options.tool_points_T = RodPoints();
   const Eigen::Vector3d place(-0.4, -0.15, scene.spec.table.top_z);
   // The keep-out centre where the held rod is now, far from the place: the tool lies clear of it
   // at the place for some yaws, but every way there starts through it.
