@@ -369,6 +369,111 @@ ScenePlan PlanScene(const SceneSpec& spec, const std::vector<std::string>& libra
   return plan;
 }
 
+namespace {
+
+/// A fixture box in the frame of the body that carries it ("table" or "rack").
+struct LocalBox {
+  std::string name;
+  std::string body;
+  Eigen::Isometry3d X_bodyB = Eigen::Isometry3d::Identity();
+  Eigen::Vector3d half = Eigen::Vector3d::Zero();
+  bool rotated = false;  // X_bodyB has a rotation (written as quat)
+};
+
+/// The table body: at the centre of its top, axes of the world.
+Eigen::Isometry3d TableBodyPose(const SceneSpec& spec, const Eigen::Isometry3d& X_WR) {
+  const TableSpec& table = spec.table;
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  X.translation() = X_WR * Eigen::Vector3d(table.center.x(), table.center.y(), table.top_z - table.thickness / 2);
+  return X;
+}
+
+/// Table (top, four legs to the floor) and rack (board y_K <= 0, ledge z_K <= 0, lip, rail and
+/// stop, two posts to the floor) as boxes in their bodies.
+std::vector<LocalBox> FixtureBoxesLocal(const SceneSpec& spec, const Eigen::Isometry3d& X_WR) {
+  std::vector<LocalBox> boxes;
+  auto add = [&](std::string name, const char* body, const Eigen::Vector3d& center, const Eigen::Vector3d& half,
+                 const Eigen::Matrix3d* rotation = nullptr) {
+    LocalBox b;
+    b.name = std::move(name);
+    b.body = body;
+    b.X_bodyB.translation() = center;
+    if (rotation) b.X_bodyB.linear() = *rotation;
+    b.half = half;
+    b.rotated = rotation != nullptr;
+    boxes.push_back(std::move(b));
+  };
+  const TableSpec& table = spec.table;
+  const double table_top_W = TableBodyPose(spec, X_WR).translation().z();
+  add("table_top", "table", Eigen::Vector3d::Zero(),
+      Eigen::Vector3d(table.size.x() / 2, table.size.y() / 2, table.thickness / 2));
+  const double leg_length = std::max(0.05, table_top_W - table.thickness / 2);
+  for (int i = 0; i < 4; ++i) {
+    const double sx = (i & 1) ? 1 : -1;
+    const double sy = (i & 2) ? 1 : -1;
+    add("table_leg" + std::to_string(i), "table",
+        Eigen::Vector3d(sx * (table.size.x() / 2 - 0.03), sy * (table.size.y() / 2 - 0.03),
+                        -table.thickness / 2 - leg_length / 2),
+        Eigen::Vector3d(0.02, 0.02, leg_length / 2));
+  }
+  const RackSpec& rack = spec.rack;
+  const double board_t = 0.02;
+  add("rack_board", "rack", Eigen::Vector3d(0, -board_t / 2, rack.height / 2 - 0.03),
+      Eigen::Vector3d(rack.width / 2, board_t / 2, rack.height / 2));
+  add("rack_ledge", "rack", Eigen::Vector3d(0, rack.ledge_depth / 2 - board_t / 2, -0.01),
+      Eigen::Vector3d(rack.width / 2, rack.ledge_depth / 2 + board_t / 2, 0.01));
+  if (rack.lip_height > 0) {
+    add("rack_lip", "rack", Eigen::Vector3d(0, rack.ledge_depth + 0.005, rack.lip_height / 2 - 0.01),
+        Eigen::Vector3d(rack.width / 2, 0.005, rack.lip_height / 2 + 0.01));
+  }
+  if (rack.standoff > 0) {
+    add("rack_rail", "rack", Eigen::Vector3d(0, rack.standoff / 2, rack.rail_height),
+        Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kRailHalfHeight));
+    add("rack_stop", "rack", Eigen::Vector3d(0, rack.standoff / 2, kStopHeight / 2),
+        Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kStopHeight / 2));
+  }
+  // Posts: vertical in the world, from the ledge down to the floor, behind the board.
+  const Eigen::Isometry3d X_WK = X_WR * RackPose(rack);
+  const double ledge_height_W = X_WK.translation().z();
+  const Eigen::Matrix3d R_KW = X_WK.linear().transpose();
+  for (int side = -1; side <= 1; side += 2) {
+    const Eigen::Vector3d foot_K(side * (rack.width / 2 - 0.03), -board_t - 0.02, -0.02);
+    const double length = ledge_height_W - 0.02;
+    const Eigen::Vector3d center_K = foot_K + R_KW * Eigen::Vector3d(0, 0, -length / 2);
+    add("rack_post" + std::to_string(side > 0), "rack", center_K, Eigen::Vector3d(0.02, 0.02, length / 2), &R_KW);
+  }
+  return boxes;
+}
+
+/// Colour and contact attributes of a fixture geom. The rack is covered with rubber (high
+/// friction): tools rest on it by friction alone.
+std::string FixtureStyle(const std::string& name) {
+  const std::string rubber = " friction=\"1.5 0.02 0.001\" condim=\"6\"";
+  if (name == "table_top") return " rgba=\"0.62 0.45 0.30 1\"";
+  if (name.rfind("table_leg", 0) == 0) return " rgba=\"0.45 0.32 0.2 1\"";
+  if (name == "rack_board") return " rgba=\"0.82 0.82 0.80 1\"" + rubber;
+  if (name == "rack_ledge") return " rgba=\"0.70 0.70 0.68 1\"" + rubber;
+  if (name == "rack_lip") return " rgba=\"0.70 0.70 0.68 1\"";
+  if (name == "rack_rail" || name == "rack_stop") return " rgba=\"0.55 0.55 0.53 1\"" + rubber;
+  return " rgba=\"0.3 0.3 0.3 1\"";  // posts
+}
+
+}  // namespace
+
+std::vector<FixtureBox> FixtureBoxes(const SceneSpec& spec) {
+  spec.Validate();
+  Eigen::Isometry3d X_WR = Eigen::Isometry3d::Identity();
+  X_WR.translation() = spec.robot_base;
+  const Eigen::Isometry3d X_RW = X_WR.inverse();
+  const Eigen::Isometry3d X_R_table = X_RW * TableBodyPose(spec, X_WR);
+  const Eigen::Isometry3d X_RK = RackPose(spec.rack);
+  std::vector<FixtureBox> out;
+  for (const LocalBox& b : FixtureBoxesLocal(spec, X_WR)) {
+    out.push_back({b.name, (b.body == "table" ? X_R_table : X_RK) * b.X_bodyB, b.half});
+  }
+  return out;
+}
+
 ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription& robot,
                            const std::vector<toollib::ToolModel>& library, const ScenePlan& plan) {
   spec.Validate();
@@ -464,70 +569,24 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                   Vec(X_WS.linear().col(0)) + " " + Vec(-X_WS.linear().col(1)) + "\" fovy=\"50\"/>");
   }
 
-  // Table: top and four legs, placed in R.
+  // Table and rack: the fixture boxes, in their bodies (one definition, shared with FixtureBoxes).
   const TableSpec& table = spec.table;
-  const Eigen::Vector3d top_center(table.center.x(), table.center.y(),
-                                   table.top_z - table.thickness / 2);
-  const Eigen::Vector3d p_W_top = scene.X_WR * top_center;
-  w.Line(2, "<body name=\"table\" pos=\"" + Vec(p_W_top) + "\">");
-  w.Line(3, "<geom name=\"table_top\" class=\"world\" type=\"box\" size=\"" +
-                Vec(Eigen::Vector3d(table.size.x() / 2, table.size.y() / 2, table.thickness / 2)) +
-                "\" rgba=\"0.62 0.45 0.30 1\"/>");
-  const double leg_length = std::max(0.05, p_W_top.z() - table.thickness / 2);
-  for (int i = 0; i < 4; ++i) {
-    const double sx = (i & 1) ? 1 : -1;
-    const double sy = (i & 2) ? 1 : -1;
-    const Eigen::Vector3d p(sx * (table.size.x() / 2 - 0.03), sy * (table.size.y() / 2 - 0.03),
-                            -table.thickness / 2 - leg_length / 2);
-    w.Line(3, "<geom name=\"table_leg" + std::to_string(i) + "\" class=\"world\" type=\"box\" size=\"0.02 0.02 " +
-                  Num(leg_length / 2) + "\" pos=\"" + Vec(p) + "\" rgba=\"0.45 0.32 0.2 1\"/>");
-  }
-  w.Line(2, "</body>");
-
-  // Rack in its own frame K: board (y_K <= 0), ledge (z_K <= 0), lip, and two posts to the floor.
   const RackSpec& rack = spec.rack;
-  w.Line(2, "<body name=\"rack\"" + PoseAttributes(X_WK) + ">");
-  // The rack is covered with rubber (high friction): tools rest on it by friction alone.
-  const double board_t = 0.02;
-  w.Line(3, "<geom name=\"rack_board\" class=\"world\" type=\"box\" size=\"" +
-                Vec(Eigen::Vector3d(rack.width / 2, board_t / 2, rack.height / 2)) + "\" pos=\"" +
-                Vec(Eigen::Vector3d(0, -board_t / 2, rack.height / 2 - 0.03)) +
-                "\" rgba=\"0.82 0.82 0.80 1\" friction=\"1.5 0.02 0.001\" condim=\"6\"/>");
-  w.Line(3, "<geom name=\"rack_ledge\" class=\"world\" type=\"box\" size=\"" +
-                Vec(Eigen::Vector3d(rack.width / 2, rack.ledge_depth / 2 + board_t / 2, 0.01)) +
-                "\" pos=\"" + Vec(Eigen::Vector3d(0, rack.ledge_depth / 2 - board_t / 2, -0.01)) +
-                "\" rgba=\"0.70 0.70 0.68 1\" friction=\"1.5 0.02 0.001\" condim=\"6\"/>");
-  if (rack.lip_height > 0) {
-    w.Line(3, "<geom name=\"rack_lip\" class=\"world\" type=\"box\" size=\"" +
-                  Vec(Eigen::Vector3d(rack.width / 2, 0.005, rack.lip_height / 2 + 0.01)) +
-                  "\" pos=\"" + Vec(Eigen::Vector3d(0, rack.ledge_depth + 0.005, rack.lip_height / 2 - 0.01)) +
-                  "\" rgba=\"0.70 0.70 0.68 1\"/>");
-  }
-  if (rack.standoff > 0) {
-    w.Line(3, "<geom name=\"rack_rail\" class=\"world\" type=\"box\" size=\"" +
-                  Vec(Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kRailHalfHeight)) + "\" pos=\"" +
-                  Vec(Eigen::Vector3d(0, rack.standoff / 2, rack.rail_height)) +
-                  "\" rgba=\"0.55 0.55 0.53 1\" friction=\"1.5 0.02 0.001\" condim=\"6\"/>");
-    w.Line(3, "<geom name=\"rack_stop\" class=\"world\" type=\"box\" size=\"" +
-                  Vec(Eigen::Vector3d(rack.width / 2, rack.standoff / 2, kStopHeight / 2)) + "\" pos=\"" +
-                  Vec(Eigen::Vector3d(0, rack.standoff / 2, kStopHeight / 2)) +
-                  "\" rgba=\"0.55 0.55 0.53 1\" friction=\"1.5 0.02 0.001\" condim=\"6\"/>");
-  }
-  {
-    // Posts: vertical in the world, from the ledge down to the floor, behind the board.
-    const double ledge_height_W = X_WK.translation().z();
-    const Eigen::Matrix3d R_KW = X_WK.linear().transpose();
-    for (int side = -1; side <= 1; side += 2) {
-      const Eigen::Vector3d foot_K(side * (rack.width / 2 - 0.03), -board_t - 0.02, -0.02);
-      const double length = ledge_height_W - 0.02;
-      const Eigen::Vector3d center_K = foot_K + R_KW * Eigen::Vector3d(0, 0, -length / 2);
-      w.Line(3, "<geom name=\"rack_post" + std::to_string(side > 0) +
-                    "\" class=\"world\" type=\"box\" size=\"0.02 0.02 " + Num(length / 2) +
-                    "\" pos=\"" + Vec(center_K) + "\" quat=\"" + Quat(R_KW) +
-                    "\" rgba=\"0.3 0.3 0.3 1\"/>");
+  const std::vector<LocalBox> fixtures = FixtureBoxesLocal(spec, scene.X_WR);
+  for (const char* body : {"table", "rack"}) {
+    const bool table = std::string_view(body) == "table";
+    const Eigen::Isometry3d X_WBody = table ? TableBodyPose(spec, scene.X_WR) : X_WK;
+    w.Line(2, "<body name=\"" + std::string(body) + "\"" +
+                  (table ? " pos=\"" + Vec(X_WBody.translation()) + "\"" : PoseAttributes(X_WBody)) + ">");
+    for (const LocalBox& box : fixtures) {
+      if (box.body != body) continue;
+      w.Line(3, "<geom name=\"" + box.name + "\" class=\"world\" type=\"box\" size=\"" + Vec(box.half) +
+                    "\" pos=\"" + Vec(box.X_bodyB.translation()) + "\"" +
+                    (box.rotated ? " quat=\"" + Quat(box.X_bodyB.linear()) + "\"" : std::string()) +
+                    FixtureStyle(box.name) + "/>");
     }
+    w.Line(2, "</body>");
   }
-  w.Line(2, "</body>");
 
   // Robot: root link fixed in the world.
   w.Line(2, "<body name=\"" + Xml(robot.model.links[0].name) + "\"" + PoseAttributes(scene.X_WR) + ">");

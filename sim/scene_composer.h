@@ -84,6 +84,19 @@ Eigen::Isometry3d RackPose(const RackSpec& rack);
 /// the ledge and against the board (rotation only, origin at the slot).
 Eigen::Isometry3d CellPose(const RackSpec& rack, std::string_view cell);
 
+/// A box of the scene's fixed furniture (table top and legs; rack board, ledge, rail, stop and
+/// posts), exactly as ComposeScene writes it (MJCF geom name, pose and size).
+struct FixtureBox {
+  std::string name;                                         // geom name, e.g. "rack_ledge"
+  Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();   // box centre and axes in R
+  Eigen::Vector3d half = Eigen::Vector3d::Zero();           // half extents [m]
+};
+
+/// The table's and the rack's boxes of `spec` in the robot root R: what the robot knows of its
+/// workspace from the scene file (by calibration, like the table height), not the tools on it.
+/// Throws std::invalid_argument when the spec is invalid.
+std::vector<FixtureBox> FixtureBoxes(const SceneSpec& spec);
+
 /// Builds the MJCF: robot (from the URDF, with position servos and the helmet camera), table,
 /// rack, ball and the planned tools resting on the ledge against the board. Robot geoms collide
 /// with the world and tools only. Throws std::invalid_argument when a planned tool is not in

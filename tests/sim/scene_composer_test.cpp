@@ -1,7 +1,10 @@
 #include "sim/scene_composer.h"
 
+#include <algorithm>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <mujoco/mujoco.h>
 
 #include "common/paths.h"
 #include "sim/world.h"
@@ -133,6 +136,32 @@ TEST_F(ComposerTest, EveryToolInEveryCellComposesAndLoads) {
   }
   const ScenePlan plan = PlanScene(*spec_, names_, 5, {});
   EXPECT_NO_THROW(World(ComposeScene(*spec_, *robot_, *library_, plan).mjcf, "seed 5"));
+}
+
+// One source of truth: the fixture boxes the planner avoids are the geoms the physics collides with.
+TEST_F(ComposerTest, FixtureBoxesAreTheComposedGeoms) {
+  const ComposedScene scene = ComposeScene(*spec_, *robot_, *library_, PlanScene(*spec_, names_, 3, {}));
+  World world(scene.mjcf, "fixtures");
+  const mjModel* m = world.mj_model();
+  mjData* d = world.mj_data();
+  mj_kinematics(m, d);
+  const std::vector<FixtureBox> boxes = FixtureBoxes(*spec_);
+  std::vector<std::string> names;
+  for (const FixtureBox& box : boxes) names.push_back(box.name);
+  for (const char* expected : {"table_top", "table_leg0", "rack_board", "rack_ledge", "rack_rail", "rack_post1"}) {
+    EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
+  }
+  for (const FixtureBox& box : boxes) {
+    const int id = mj_name2id(m, mjOBJ_GEOM, box.name.c_str());
+    ASSERT_GE(id, 0) << box.name;
+    EXPECT_EQ(m->geom_type[id], mjGEOM_BOX) << box.name;
+    const Eigen::Isometry3d X_WB = scene.X_WR * box.X_RB;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(m->geom_size[3 * id + k], box.half[k], 1e-9) << box.name;
+      EXPECT_NEAR(d->geom_xpos[3 * id + k], X_WB.translation()[k], 1e-7) << box.name;
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(d->geom_xmat[9 * id + 3 * k + c], X_WB.linear()(k, c), 1e-7) << box.name;
+    }
+  }
 }
 
 TEST_F(ComposerTest, BrokenMjcfIsReportedWithSource) {
