@@ -108,6 +108,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
 
   sim::SimRobot robot(world);
   control::GraspOptions grasp_options = options.grasp;
+  grasp_options.obstacles = WorkspaceObstacles(scene.spec);
   if (options.slide_along_handle) {
     grasp_options.handle_slide_m =
         FreeHandleSlide(scene.robot, model->handle.length, options.slide_margin_m);
@@ -214,6 +215,8 @@ int RunGraspBench(const BenchRequest& request) {
                           {"axis_flipped", r.grasp.axis_flipped},
                           {"slide_m", r.grasp.slide_m},
                           {"candidates_feasible", r.grasp.candidates_feasible},
+                          {"paths_blocked", r.grasp.paths_blocked},
+                          {"transfer_raised", r.grasp.transfer_raised},
                           {"plan_ms", r.grasp.plan_ms},
                           {"sim_time_s", r.sim_time},
                           {"wall_ms", r.wall_ms}};

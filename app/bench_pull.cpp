@@ -147,8 +147,10 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   // 1. Grasp from the ground-truth handle as the episode grasps from the perceived one
   // (GraspToolForAction: choked away from the effector, the effector on the +y_P side first).
   const Eigen::Vector3d p_R_effector = X_RW * X_WT_rest * model->effector.center;
+  control::GraspOptions grasp_options = options.grasp;
+  grasp_options.obstacles = WorkspaceObstacles(scene.spec);
   out.grasp = control::GraspToolForAction(robot, scene.robot, X_RH, p_R_effector,
-                                          FreeHandleSlide(scene.robot, model->handle.length), options.grasp);
+                                          FreeHandleSlide(scene.robot, model->handle.length), grasp_options);
   frame("1_grasp");
   if (out.grasp.status != control::GraspStatus::kGrasped) {
     return finish(std::string("grasp_") + control::ToString(out.grasp.status) + ": " + out.grasp.reason);
@@ -285,6 +287,7 @@ int RunPullBench(const BenchRequest& request) {
                           {"pull_motion_s", r.pull.motion_s},
                           {"grasp_roll_deg", r.grasp.roll_rad * 180 / M_PI},
                           {"grasp_axis_flipped", r.grasp.axis_flipped},
+                          {"grasp_regrasps", r.grasp.regrasps},
                           {"grasp_slide_m", r.grasp.slide_m},
                           {"in_hand_effector_dir_P", vec(r.in_hand_effector_dir_P)},
                           {"in_hand_working_dir_P", vec(r.in_hand_working_dir_P)},

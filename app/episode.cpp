@@ -461,6 +461,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // where the recognised model puts it in the perceived tool pose.
       const Eigen::Vector3d p_R_effector = tool.X_RT * model->effector.center;
       control::GraspOptions grasp_options;
+      grasp_options.obstacles = WorkspaceObstacles(spec);
       grasp_options.on_stage = [&](const char* stage) { stage_frame(std::string("grasp_") + stage); };
       const control::GraspResult g = control::GraspToolForAction(
           robot, desc, tool.handle.X_FH, p_R_effector, FreeHandleSlide(desc, tool.handle.length), grasp_options);
@@ -507,6 +508,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"axis_flipped", g.axis_flipped},
                    {"roll_deg", g.roll_rad * 180 / M_PI},
                    {"candidates", g.candidates},
+                   {"paths_blocked", g.paths_blocked},
+                   {"last_blocked", g.last_blocked},
+                   {"transfer_raised", g.transfer_raised},
+                   {"regrasps", g.regrasps},
+                   {"regrasp_reason", g.regrasp_reason},
                    {"plan_ms", g.plan_ms},
                    {"robot_s", {{"transfer", g.transfer_s},
                                 {"approach", g.approach_s},

@@ -103,6 +103,12 @@ InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry
           (X_PT * p_T_effector - X_PT_truth * p_T_effector).norm()};
 }
 
+std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec) {
+  std::vector<control::ObstacleBox> out;
+  for (const sim::FixtureBox& box : sim::FixtureBoxes(spec)) out.push_back({box.name, box.X_RB, box.half});
+  return out;
+}
+
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
   const Eigen::Isometry3d X_RK = sim::RackPose(spec.rack);
   return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);

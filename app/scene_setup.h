@@ -66,6 +66,10 @@ struct InHandError {
 InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry3d& X_PT_truth,
                             const Eigen::Vector3d& p_T_effector);
 
+/// The scene's fixed furniture (sim::FixtureBoxes: table top and legs, the rack's boxes) as
+/// obstacles for the arm's planning: known from the scene file, like the table height.
+std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec);
+
 /// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
 

@@ -67,6 +67,7 @@ struct Plan {
   double rest_cost = 0.0;
   Eigen::VectorXd q_grasp;
   Eigen::VectorXd q_pregrasp;             // end of the joint-space transfer: staging pose, else pre-grasp
+  std::vector<Eigen::VectorXd> transfer_via;  // joint-space via postures before q_pregrasp
   std::vector<Eigen::VectorXd> approach;  // staging (exclusive) -> pre-grasp -> grasp (inclusive)
   std::vector<Eigen::VectorXd> lift;
 };
@@ -135,6 +136,13 @@ void GraspOptions::Validate() const {
   if (!(pregrasp_up_m >= 0)) fail("pregrasp_up_m", pregrasp_up_m, ">= 0");
   if (!(staging_back_m >= 0)) fail("staging_back_m", staging_back_m, ">= 0");
   if (!(staging_up_m >= 0)) fail("staging_up_m", staging_up_m, ">= 0");
+  if (!(obstacle_margin_m >= 0)) fail("obstacle_margin_m", obstacle_margin_m, ">= 0");
+  if (max_regrasps < 0) fail("max_regrasps", max_regrasps, ">= 0");
+  if (!(transfer_check_step_rad > 0)) fail("transfer_check_step_rad", transfer_check_step_rad, "> 0");
+  if (!(transfer_inward_m >= 0)) fail("transfer_inward_m", transfer_inward_m, ">= 0");
+  for (const double raise : transfer_raise_m) {
+    if (!(raise > 0) || !std::isfinite(raise)) fail("transfer_raise_m", raise, "finite, > 0");
+  }
   if (approach_waypoints < 1) fail("approach_waypoints", approach_waypoints, ">= 1");
   if (!(lift_m >= 0)) fail("lift_m", lift_m, ">= 0");
   if (lift_waypoints < 1) fail("lift_waypoints", lift_waypoints, ">= 1");
@@ -179,6 +187,64 @@ const char* ToString(GraspStatus status) {
   return "unknown";
 }
 
+namespace {
+
+/// Checks a planned grasp path's joint-space transfer from q_now to plan->q_pregrasp against the
+/// obstacles. A blocked transfer is tried again through via postures, for each of
+/// options.transfer_raise_m in turn: the transfer's end raised (then down onto it), the current
+/// palm raised (then across), and both; the first clear one sets plan->transfer_via. False when
+/// the transfer stays blocked (counted and described in *result).
+bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const KinematicChain& chain,
+                   const Eigen::VectorXd& q_now, const GraspOptions& options, Plan* plan, GraspResult* result) {
+  const double step = options.transfer_check_step_rad;
+  auto first_hit = [&](const std::vector<Eigen::VectorXd>& via) {
+    Eigen::VectorXd from = q_now;
+    for (const Eigen::VectorXd& q : via) {
+      if (auto hit = clearance.CheckLine(from, q, step)) return hit;
+      from = q;
+    }
+    return clearance.CheckLine(from, plan->q_pregrasp, step);
+  };
+  const std::optional<ClearanceHit> hit = first_hit({});
+  if (!hit) return true;
+  // A palm pose moved from the one at posture q (warm start) by `shift` in R.
+  auto shifted = [&](const Eigen::VectorXd& q, const Eigen::Vector3d& shift) -> std::optional<Eigen::VectorXd> {
+    Eigen::Isometry3d X = chain.TipPose(q);
+    X.translation() += shift;
+    const IkResult r = solver.Solve(X, q);
+    if (!Converged(r)) return std::nullopt;
+    return r.q;
+  };
+  Eigen::Vector3d inward = -chain.TipPose(plan->q_pregrasp).translation();  // toward the robot's z axis
+  inward.z() = 0;
+  inward = inward.norm() > 1e-6 ? inward.normalized() : Eigen::Vector3d::Zero();
+  for (const double raise : options.transfer_raise_m) {
+    const Eigen::Vector3d up = raise * Eigen::Vector3d::UnitZ();
+    std::vector<std::vector<Eigen::VectorXd>> routes;
+    // Above the transfer's end, then down onto it; the same pulled in toward the robot (the hand
+    // comes up inside the rack's edge, then moves out over it); above the current palm.
+    const auto above_end = shifted(plan->q_pregrasp, up);
+    const auto inside_end = shifted(plan->q_pregrasp, up + options.transfer_inward_m * inward);
+    const auto above_now = shifted(q_now, up);
+    if (above_end) routes.push_back({*above_end});
+    if (inside_end) routes.push_back({*inside_end});
+    if (above_now) routes.push_back({*above_now});
+    if (above_now && inside_end) routes.push_back({*above_now, *inside_end});
+    for (const auto& via : routes) {
+      if (!first_hit(via)) {
+        plan->transfer_via = via;
+        return true;
+      }
+    }
+  }
+  ++result->paths_blocked;
+  result->last_blocked = Cat("the transfer would bring ", hit->link, " within ", options.obstacle_margin_m, " m of ",
+                             hit->obstacle, " (at ", hit->p_R.transpose(), " m in R)");
+  return false;
+}
+
+}  // namespace
+
 GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Isometry3d& X_RH,
                         const GraspOptions& options) {
   options.Validate();
@@ -205,6 +271,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
     }
   }
   const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
+  const ArmClearance clearance(desc, options.obstacles, desc.hand_open, options.obstacle_margin_m);
 
   // The grasp frame G in P: origin on the grasp cylinder's axis, z along it, x toward the palm
   // normal's component orthogonal to it (any fixed choice works: the roll is sampled).
@@ -341,6 +408,10 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
       }
       if (back.size() == 2) p.lift.insert(p.lift.end(), back.begin(), back.end());
     }
+    if (ok && !clearance.empty() && !ClearTransfer(clearance, solver, chain, q_now, options, &p, &result)) {
+      last_failure = result.last_blocked;
+      ok = false;
+    }
     if (ok) *out = std::move(p);
     return ok;
   };
@@ -431,6 +502,12 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
 
   // 1. Open hand, arm to the pre-grasp.
   double t0 = robot.Time();
+  for (const Eigen::VectorXd& via : plan.transfer_via) {
+    std::map<std::string, double> up = ChainGoal(chain, via);
+    for (const auto& [joint, value] : desc.hand_open) up[joint] = value;
+    MoveJoints(robot, up, options.transfer);
+  }
+  result.transfer_raised = !plan.transfer_via.empty();
   std::map<std::string, double> goal = ChainGoal(chain, plan.q_pregrasp);
   for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
   const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
@@ -697,6 +774,8 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   GraspResult last;
   int candidates = 0;
   double plan_ms = 0.0;
+  int paths_blocked = 0;
+  std::string last_blocked;
   auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
     GraspOptions o = options;
     o.axis_direction = direction;
@@ -704,8 +783,12 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
     last = GraspHandle(robot, desc, X_RH_grasped, o);
     candidates += last.candidates;
     plan_ms += last.plan_ms;
+    paths_blocked += last.paths_blocked;
+    if (!last.last_blocked.empty()) last_blocked = last.last_blocked;
     last.candidates = candidates;
     last.plan_ms = plan_ms;
+    last.paths_blocked = paths_blocked;
+    last.last_blocked = last_blocked;
     last.slide_m = (X_RH_grasped.translation() - X_RH.translation()).dot(z_H) +
                    last.slide_m * X_RH_grasped.linear().col(2).dot(z_H);
     return last.status != GraspStatus::kUnreachable && last.status != GraspStatus::kIkFailed;
@@ -717,28 +800,48 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   const std::vector<std::string> names = robot.JointNames();
   const Eigen::VectorXd q_start = ModelQFrom(desc, names, robot.ReadEncoders());
   int blocked = 0;
+  int regrasps = 0;
+  std::string regrasp_reason;
   auto back_off = [&] {
-    ++blocked;
     std::map<std::string, double> goal = ChainGoal(chain, q_start);
     for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
     MoveJoints(robot, goal, options.transfer);
   };
+  // True when `last` is the answer; false to try the next grasp. A grip that let the tool slip
+  // out (or closed on nothing) is tried again, up to max_regrasps times, the other way round.
+  bool skip_direction = false;
   auto done = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
     if (!attempt(X_RH_grasped, direction, slide)) return false;
-    if (last.status != GraspStatus::kMotionTimeout) return true;
+    const bool slipped = last.status == GraspStatus::kDropped || last.status == GraspStatus::kEmptyHand;
+    if (slipped && regrasps < options.max_regrasps) {
+      ++regrasps;
+      regrasp_reason = Cat(ToString(last.status), ": ", last.reason);
+      skip_direction = true;
+    } else if (last.status == GraspStatus::kMotionTimeout) {
+      ++blocked;
+    } else {
+      return true;
+    }
     back_off();
     return false;
   };
+  auto finish = [&] {
+    last.regrasps = regrasps;
+    last.regrasp_reason = regrasp_reason;
+    return last;
+  };
   for (const int direction : {1, 0}) {
+    skip_direction = false;
     for (const double choke : {0.6, 0.3, 0.0}) {
+      if (skip_direction) break;
       Eigen::Isometry3d X = X_RH_toward;
       X.translation() -= choke * max_slide_m * X_RH_toward.linear().col(2);
-      if (done(X, direction, 0.0)) return last;
+      if (done(X, direction, 0.0)) return finish();
     }
   }
-  if (max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return last;
+  if (max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
   if (blocked > 0) last.reason += Cat(" (", blocked, " grasp transfers blocked on the way and backed off)");
-  return last;
+  return finish();
 }
 
 const char* ToString(ToolAction action) {

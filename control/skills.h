@@ -11,6 +11,7 @@
 #include <Eigen/Geometry>
 
 #include "common/robot_interface.h"
+#include "control/clearance.h"
 #include "control/ik.h"
 #include "control/motion.h"
 #include "robot/robot_description.h"
@@ -80,6 +81,25 @@ struct GraspOptions {
   /// under gravity; beyond this the motion counts as not done).
   double arm_arrival_tol = 0.05;
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};  // home -> pre-grasp
+  /// Fixed boxes of the workspace (table, rack: from the scene file, not perceived) that the
+  /// forearm and the open hand must stay obstacle_margin_m [m] (>= 0) clear of on the joint-space
+  /// transfer, checked every transfer_check_step_rad (> 0) of joint motion. A transfer that would
+  /// pass through one is rerouted through via postures, for each of transfer_raise_m [m] in turn:
+  /// above its end (then down onto it), above it and transfer_inward_m [m] (>= 0) closer to the
+  /// robot (then out over the rack's edge), above the current palm, or the last two; a transfer
+  /// that stays blocked rejects the candidate. The straight lines from the staging pose on are not checked
+  /// (a handle near the ledge puts the open thumb within a centimetre of it there). Empty = no check (the open hand can then catch
+  /// on the rack's ledge and the transfer times out: 6 of 50 random episodes in session 9).
+  std::vector<ObstacleBox> obstacles;
+  double obstacle_margin_m = 0.0;
+  double transfer_check_step_rad = 0.05;
+  std::vector<double> transfer_raise_m = {0.05, 0.15};
+  double transfer_inward_m = 0.15;
+  /// GraspToolForAction only: a grasp whose tool slipped out in the lift (kDropped) or whose
+  /// hand closed on nothing (kEmptyHand) backs off and grasps again, the other way round along
+  /// the handle, at most this many times (>= 0). The tool is not perceived again: one that slipped
+  /// out stands where it stood (it rests on the ledge again); one that fell leaves the hand empty.
+  int max_regrasps = 1;
   MotionOptions approach{0.4, 0.01, 0.02, 0.05, 0.3};  // each approach waypoint
   MotionOptions lift{0.4, 0.01, 0.02, 0.05, 0.1};      // each lift waypoint (hand joints never "arrive")
   IkOptions ik;  // the Cartesian solver's options (grasp, pre-grasp, approach and lift waypoints)
@@ -136,6 +156,11 @@ struct GraspResult {
   int candidates_feasible = 0;  // of those, passing the filters with a converged grasp IK
   double rest_cost = 0.0;       // IK rest cost of the chosen grasp posture [1]
   double plan_ms = 0.0;         // wall time of choosing and planning (all IK) [ms], informational
+  int paths_blocked = 0;        // complete paths rejected: the transfer would hit an obstacle
+  std::string last_blocked;     // the last of those: which link, which obstacle, where
+  bool transfer_raised = false; // the chosen transfer goes through the raised palm pose first
+  int regrasps = 0;             // GraspToolForAction: grasps tried again after a slip (max_regrasps)
+  std::string regrasp_reason;   // the slip that made it try again (status: reason)
   double transfer_s = 0.0;      // robot time: to the pre-grasp [s]
   double approach_s = 0.0;      // robot time: pre-grasp -> grasp [s]
   double close_s = 0.0;         // robot time: preshape, close, settle [s]
@@ -155,6 +180,8 @@ struct GraspResult {
 ///     when that is out of reach), at least lift_m and up to lift_max_m, each solve warm-started
 ///     from the previous posture (path_restarts, path_ipopt_iterations). The first
 ///     complete path wins; nothing moves before one is found;
+///     With options.obstacles, a path whose transfer would bring the forearm or the open hand
+///     near one is rerouted through a raised palm pose or rejected (ArmClearance);
 ///  3. opens the hand and moves (MoveJoints, joint space) to the staging pose, follows the
 ///     waypoints to the grasp, preshapes the hand, ramps it to desc.hand_closed over close_time,
 ///     checks the fingers stopped on something, lifts along the waypoints and holds hold_time.
@@ -183,9 +210,10 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 /// A grasp that found no plan has not moved the robot, so each next one starts from the same
 /// posture; one whose transfer to the pre-grasp was blocked (kMotionTimeout: the open hand caught
 /// on a neighbouring tool, which the plan does not model) moves back to that posture first, with
-/// the hand open. Returns the first grasp that planned (its status says whether it held), else the
-/// last failure, with `candidates` and plan_ms summed over all attempts and slide_m along z of
-/// the given X_RH. `max_slide_m` >= 0 (e.g. app's FreeHandleSlide); options.handle_slide_m and
+/// the hand open, and so does one that let the tool slip out or closed on nothing (at most
+/// options.max_regrasps times; the rest of that way round is skipped). Returns the first grasp
+/// that planned (its status says whether it held), else the last failure, with `candidates`,
+/// plan_ms and paths_blocked summed over all attempts and slide_m along z of the given X_RH. `max_slide_m` >= 0 (e.g. app's FreeHandleSlide); options.handle_slide_m and
 /// options.axis_direction are overridden. Throws as GraspHandle and HandleTowardEffector do, and
 /// std::invalid_argument for a negative or non-finite max_slide_m.
 GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
