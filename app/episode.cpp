@@ -453,6 +453,29 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 5. Grasp the handle; hand-over when out of reach. ----
     Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
     bool holding = false;
+    // The hand-over (thesis Fig. 5.20): point at p_R_point, open the hand, wait; a person puts
+    // the tool in the hand. They hold it out by the handle's end away from the effector, as the
+    // robot's own grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it
+    // reaches further. Sets X_PT to where the person put it; recorded as assisted.
+    auto hand_over_tool = [&](const Eigen::Vector3d& p_R_point) {
+      const Eigen::Isometry3d X_TH = ChokedHandleFrame(desc, perception::SidecarHandleFrame(*model),
+                                                       model->effector.center, model->handle.length);
+      // The open hand waits turned 35 deg to the robot's right, between the table and the rack,
+      // and 20 cm up: clear of the rack (a long tool put in a hand held out toward the rack
+      // overlapped it and stuck there), high above the table, and where the head can look at it.
+      control::HandOverOptions hand_over;
+      hand_over.receive_at_R = 0.30 * Eigen::Vector3d(-std::cos(35 * M_PI / 180), std::sin(35 * M_PI / 180), 0.0) +
+                               0.20 * Eigen::Vector3d::UnitZ();
+      const control::HandOverResult h = control::HandOver(
+          robot, desc, p_R_point,
+          [&](const Eigen::Isometry3d& X_RP) {
+            world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
+          },
+          hand_over);
+      result.assisted = true;
+      X_PT = PalmGraspFrame(desc) * X_TH.inverse();
+      return h;
+    };
     run_stage("grasp_tool", [&](StageRecord& s) {
       const double z0 = world.ground_truth().Pose(tool_body).translation().z();
       // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
@@ -472,30 +495,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         X_PT = g.X_RP_grasp.inverse() * tool.X_RT;
         holding = true;
       } else {
-        // Thesis Fig. 5.20: point at the tool, open the hand, wait; a person puts it in the hand.
-        // The thesis asks for help when the tool is out of reach; the robot here also asks when
-        // it could not get its hand there (blocked on the way, no complete path) or closed it on
-        // nothing: the episode goes on, recorded as assisted.
-        // The person holds it out by the handle's end away from the effector, as the robot's own
-        // grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it reaches further.
-        const Eigen::Isometry3d X_TH = ChokedHandleFrame(desc, perception::SidecarHandleFrame(*model),
-                                                         model->effector.center, model->handle.length);
-        // The open hand waits turned 35 deg to the robot's right, between the table and the rack,
-        // and 20 cm up: clear of the rack (a long tool put in a hand held out toward the rack
-        // overlapped it and stuck there), high above the table, and where the head can look at it.
-        control::HandOverOptions hand_over;
-        hand_over.receive_at_R = 0.30 * Eigen::Vector3d(-std::cos(35 * M_PI / 180), std::sin(35 * M_PI / 180), 0.0) +
-                                 0.20 * Eigen::Vector3d::UnitZ();
-        const control::HandOverResult h = control::HandOver(
-            robot, desc, tool.handle.center,
-            [&](const Eigen::Isometry3d& X_RP) {
-              world.TeleportFreeBody(tool_body, scene.composed.X_WR * X_RP * PalmGraspFrame(desc) * X_TH.inverse());
-            },
-            hand_over);
+        // Thesis Fig. 5.20. The thesis asks for help when the tool is out of reach; the robot
+        // here also asks when it could not get its hand there (blocked on the way, no complete
+        // path) or closed it on nothing: the episode goes on, recorded as assisted.
+        const control::HandOverResult h = hand_over_tool(tool.handle.center);
         stage_frame("hand_over");
-        result.assisted = true;
         holding = h.holding;
-        X_PT = PalmGraspFrame(desc) * X_TH.inverse();  // where the person put it
         s.outcome = "handed_over";
         s.reason = h.holding ? std::string(control::ToString(g.status)) + ": " + g.reason : h.reason;
       }
@@ -522,7 +527,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     if (!holding) return finish();
 
     // ---- 5b. Look at the tool in the hand: it may have pivoted in the grip as it came up. ----
-    run_stage("inspect_tool", [&](StageRecord& s) {
+    // Looks at the tool in the hand and corrects X_PT (the plan's, or where the person put it).
+    auto inspect_held_tool = [&](StageRecord& s) {
       const Eigen::Isometry3d X_PT_plan = X_PT;
       const HeldToolView view = InspectHeldTool(robot, desc, see, *model, X_PT);
       const perception::HeldToolEstimate& e = view.estimate;
@@ -543,7 +549,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"used_error_deg_truth", used_error.rotation_deg},
                    {"used_effector_error_m_truth", used_error.effector_m}};
       if (!request.out_dir.empty()) cv::imwrite((request.out_dir / "in_hand.png").string(), view.picture);
-    });
+    };
+    run_stage("inspect_tool", inspect_held_tool);
     if (affordance) {
       // The same model for the tool as it is actually held.
       const Eigen::Isometry3d X_GT = PalmGraspFrame(desc).inverse() * X_PT;
@@ -558,14 +565,32 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // The recognised library model's effector geometry (library knowledge, not ground truth).
       const control::ToolEffector effector = EffectorOf(*model);
       pull_options.on_stage = [&](const char* stage) { stage_frame(std::string("action_") + stage); };
-      const control::PullResult p =
-          control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
+      control::PullResult p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
+      if ((p.status == control::PullStatus::kUnreachable || p.status == control::PullStatus::kIkFailed) &&
+          !result.assisted) {
+        // The robot's own grip leaves no way to put the effector behind the ball (a tool taken
+        // from the rack's edge, or turned in the grip as it came up); nothing has moved. It asks
+        // for the tool the way the hand-over gives it (the person takes it out of the hand
+        // first: it is out of the scene meanwhile) and plans again. Recorded as assisted; the
+        // grasp stays the robot's own.
+        s.details["regrip_after"] = std::string(control::ToString(p.status)) + ": " + p.reason;
+        world.TeleportFreeBody(tool_body, scene.composed.X_WR * Eigen::Translation3d(0.0, 3.0, 0.5));
+        const control::HandOverResult h = hand_over_tool(PalmPoseFromEncoders(desc, robot).translation());
+        stage_frame("re_grip");
+        s.details["regrip_holding"] = h.holding;
+        if (h.holding) {
+          StageRecord look;  // the inspection's record, kept in this stage's details
+          inspect_held_tool(look);
+          s.details["regrip_inspect"] = {{"outcome", look.outcome}, {"reason", look.reason}, {"details", look.details}};
+          p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
+        }
+      }
       s.ok = p.status == control::PullStatus::kPulled;
       s.outcome = control::ToString(p.status);
       s.reason = p.reason;
-      s.details = {{"planned_drag_m", p.planned_drag_m},
-                   {"planned_lift_m", p.planned_lift_m},
-                   {"action", control::ToString(p.action)}};
+      s.details["planned_drag_m"] = p.planned_drag_m;
+      s.details["planned_lift_m"] = p.planned_lift_m;
+      s.details["action"] = control::ToString(p.action);
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = ball.p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
     });
