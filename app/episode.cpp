@@ -551,6 +551,33 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       if (!request.out_dir.empty()) cv::imwrite((request.out_dir / "in_hand.png").string(), view.picture);
     };
     run_stage("inspect_tool", inspect_held_tool);
+    // Asks for the tool as the hand-over gives it (the person takes it out of the hand first: it
+    // is out of the scene meanwhile), looks at it in the hand again and records why and how in
+    // s.details. Recorded as assisted; the grasp stays the robot's own. True when holding.
+    auto regrip = [&](StageRecord& s, const std::string& why) {
+      s.details["regrip_after"] = why;
+      world.TeleportFreeBody(tool_body, scene.composed.X_WR * Eigen::Translation3d(0.0, 3.0, 0.5));
+      const control::HandOverResult h = hand_over_tool(PalmPoseFromEncoders(desc, robot).translation());
+      stage_frame("re_grip");
+      s.details["regrip_holding"] = h.holding;
+      if (!h.holding) return false;
+      StageRecord look;  // the inspection's record, kept in this stage's details
+      inspect_held_tool(look);
+      s.details["regrip_inspect"] = {{"outcome", look.outcome}, {"reason", look.reason}, {"details", look.details}};
+      return true;
+    };
+    if (result.stages.back().outcome == "kept_plan" && !result.assisted) {
+      // The robot's own grasp, but the camera finds no plausible tool pose in the hand: nothing
+      // there (the fingers closed on the rack's edge, or the tool fell as it came up), or a fit
+      // that turns the tool over. Every such episode failed its pull (random 50, session 10).
+      run_stage("re_grip", [&](StageRecord& s) {
+        s.ok = regrip(s, "inspect_tool: " + result.stages.back().reason);
+        s.outcome = s.ok ? "handed_over" : "failed";
+        if (!s.ok) s.reason = "the hand closed on nothing after the hand-over";
+      });
+      holding = result.stages.back().ok;
+      if (!holding) return finish();
+    }
     if (affordance) {
       // The same model for the tool as it is actually held.
       const Eigen::Isometry3d X_GT = PalmGraspFrame(desc).inverse() * X_PT;
@@ -570,18 +597,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
           !result.assisted) {
         // The robot's own grip leaves no way to put the effector behind the ball (a tool taken
         // from the rack's edge, or turned in the grip as it came up); nothing has moved. It asks
-        // for the tool the way the hand-over gives it (the person takes it out of the hand
-        // first: it is out of the scene meanwhile) and plans again. Recorded as assisted; the
-        // grasp stays the robot's own.
-        s.details["regrip_after"] = std::string(control::ToString(p.status)) + ": " + p.reason;
-        world.TeleportFreeBody(tool_body, scene.composed.X_WR * Eigen::Translation3d(0.0, 3.0, 0.5));
-        const control::HandOverResult h = hand_over_tool(PalmPoseFromEncoders(desc, robot).translation());
-        stage_frame("re_grip");
-        s.details["regrip_holding"] = h.holding;
-        if (h.holding) {
-          StageRecord look;  // the inspection's record, kept in this stage's details
-          inspect_held_tool(look);
-          s.details["regrip_inspect"] = {{"outcome", look.outcome}, {"reason", look.reason}, {"details", look.details}};
+        // for the tool the way the hand-over gives it and plans again.
+        if (regrip(s, std::string(control::ToString(p.status)) + ": " + p.reason)) {
           p = control::PullObject(robot, desc, X_PT, effector, ball.p_RB, ball_radius, pull_options);
         }
       }
