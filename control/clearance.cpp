@@ -66,25 +66,32 @@ ArmClearance::ArmClearance(const robot::RobotDescription& desc, std::vector<Obst
   }
 }
 
-std::optional<ClearanceHit> ArmClearance::CheckAgainst(const Eigen::VectorXd& q_model,
-                                                       const std::vector<bool>& skip) const {
-  if (obstacles_.empty()) return std::nullopt;
+double ArmClearance::Distance(const Sphere& sphere, const Eigen::Vector3d& p_R, const ObstacleBox& box) {
+  const Eigen::Vector3d p_B = box.X_RB.linear().transpose() * (p_R - box.X_RB.translation());
+  const Eigen::Vector3d d = p_B.cwiseAbs() - box.half;
+  const double outside = d.cwiseMax(0.0).norm();
+  const double surface = outside > 0 ? outside : d.maxCoeff();  // negative inside
+  return surface - sphere.radius;
+}
+
+std::vector<Eigen::Isometry3d> ArmClearance::LinkPoses(const Eigen::VectorXd& q_model) const {
   Eigen::VectorXd q = q_model;
   for (const auto& [index, value] : hand_) {
     if (index < q.size()) q[index] = value;
   }
-  const std::vector<Eigen::Isometry3d> X_RL = robot::LinkPoses(*model_, q);
+  return robot::LinkPoses(*model_, q);
+}
+
+std::optional<ClearanceHit> ArmClearance::CheckAgainst(const Eigen::VectorXd& q_model,
+                                                       const std::vector<bool>& skip) const {
+  if (obstacles_.empty()) return std::nullopt;
+  const std::vector<Eigen::Isometry3d> X_RL = LinkPoses(q_model);
   for (const Sphere& sphere : spheres_) {
     const Eigen::Vector3d p_R = X_RL[sphere.link] * sphere.p_L;
     for (size_t i = 0; i < obstacles_.size(); ++i) {
       if (skip[i]) continue;
-      const ObstacleBox& box = obstacles_[i];
-      const Eigen::Vector3d p_B = box.X_RB.linear().transpose() * (p_R - box.X_RB.translation());
-      const Eigen::Vector3d d = p_B.cwiseAbs() - box.half;
-      const double outside = d.cwiseMax(0.0).norm();
-      const double surface = outside > 0 ? outside : d.maxCoeff();  // negative inside
-      const double distance = surface - sphere.radius;
-      if (distance < margin_m_) return ClearanceHit{model_->links[sphere.link].name, box.name, p_R, distance};
+      const double distance = Distance(sphere, p_R, obstacles_[i]);
+      if (distance < margin_m_) return ClearanceHit{model_->links[sphere.link].name, obstacles_[i].name, p_R, distance};
     }
   }
   return std::nullopt;
@@ -103,10 +110,12 @@ std::optional<ClearanceHit> ArmClearance::CheckLine(const Eigen::VectorXd& from,
   if (obstacles_.empty()) return std::nullopt;
   // Obstacles the start already touches: the arm is there now, it cannot avoid them.
   std::vector<bool> skip(obstacles_.size(), false);
-  for (size_t i = 0; i < obstacles_.size(); ++i) {
-    std::vector<bool> only(obstacles_.size(), true);
-    only[i] = false;
-    skip[i] = CheckAgainst(from, only).has_value();
+  const std::vector<Eigen::Isometry3d> X_RL = LinkPoses(from);
+  for (const Sphere& sphere : spheres_) {
+    const Eigen::Vector3d p_R = X_RL[sphere.link] * sphere.p_L;
+    for (size_t i = 0; i < obstacles_.size(); ++i) {
+      skip[i] = skip[i] || Distance(sphere, p_R, obstacles_[i]) < margin_m_;
+    }
   }
   const double span = (to - from).cwiseAbs().maxCoeff();
   const int n = std::max(1, static_cast<int>(std::ceil(span / max_step_rad)));

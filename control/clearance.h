@@ -60,6 +60,10 @@ class ArmClearance {
     Eigen::Vector3d p_L = Eigen::Vector3d::Zero();
     double radius = 0;
   };
+  // Distance of a sphere at p_R from a box's surface, less its radius (negative inside) [m].
+  static double Distance(const Sphere& sphere, const Eigen::Vector3d& p_R, const ObstacleBox& box);
+  // Link poses in R at q_model with the hand's joints replaced.
+  std::vector<Eigen::Isometry3d> LinkPoses(const Eigen::VectorXd& q_model) const;
   std::optional<ClearanceHit> CheckAgainst(const Eigen::VectorXd& q_model, const std::vector<bool>& skip) const;
 
   const robot::RobotModel* model_;

@@ -35,6 +35,14 @@ std::map<std::string, double> ChainGoal(const KinematicChain& chain, const Eigen
   return goal;
 }
 
+// The chain's joints at q_model and the hand open: a move of the arm with an open hand.
+std::map<std::string, double> OpenHandGoal(const KinematicChain& chain, const Eigen::VectorXd& q_model,
+                                           const robot::RobotDescription& desc) {
+  std::map<std::string, double> goal = ChainGoal(chain, q_model);
+  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
+  return goal;
+}
+
 // Position servos sag under gravity and load (steady-state error = torque / kp). Adds the
 // measured error of the chain joints to their targets, a few times, so that the encoders (and
 // hence the hand) end where IK put them. Uses encoders only, as a real robot could.
@@ -503,14 +511,10 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // 1. Open hand, arm to the pre-grasp.
   double t0 = robot.Time();
   for (const Eigen::VectorXd& via : plan.transfer_via) {
-    std::map<std::string, double> up = ChainGoal(chain, via);
-    for (const auto& [joint, value] : desc.hand_open) up[joint] = value;
-    MoveJoints(robot, up, options.transfer);
+    MoveJoints(robot, OpenHandGoal(chain, via, desc), options.transfer);
   }
   result.transfer_raised = !plan.transfer_via.empty();
-  std::map<std::string, double> goal = ChainGoal(chain, plan.q_pregrasp);
-  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
-  const MotionResult transfer = MoveJoints(robot, goal, options.transfer);
+  const MotionResult transfer = MoveJoints(robot, OpenHandGoal(chain, plan.q_pregrasp, desc), options.transfer);
   result.transfer_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("staged");
   // The arm's arrival only: an opening finger may rest against the rack (it moves on with the hand).
@@ -803,9 +807,7 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   int regrasps = 0;
   std::string regrasp_reason;
   auto back_off = [&] {
-    std::map<std::string, double> goal = ChainGoal(chain, q_start);
-    for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
-    MoveJoints(robot, goal, options.transfer);
+    MoveJoints(robot, OpenHandGoal(chain, q_start, desc), options.transfer);
   };
   // True when `last` is the answer; false to try the next grasp. A grip that let the tool slip
   // out (or closed on nothing) is tried again, up to max_regrasps times, the other way round.
@@ -1725,9 +1727,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   MotionOptions step = options.waypoint;
   step.timeout = 0.1;
   FollowWaypoints(robot, chain, rise, step);
-  std::map<std::string, double> goal = ChainGoal(chain, q_high);
-  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
-  MoveJoints(robot, goal, options.transfer);
+  MoveJoints(robot, OpenHandGoal(chain, q_high, desc), options.transfer);
   FollowWaypoints(robot, chain, down, step);
   result.transfer_s = robot.Time() - t0;
   std::string worst;
@@ -1828,9 +1828,7 @@ HandOverResult HandOver(RobotInterface& robot, const robot::RobotDescription& de
     result.reason = Cat("no open-palm pose at (", p.transpose(), ") m in R toward the tool is reachable");
     return result;
   }
-  std::map<std::string, double> goal = ChainGoal(chain, q_goal);
-  for (const auto& [joint, value] : desc.hand_open) goal[joint] = value;
-  MoveJoints(robot, goal, options.transfer);
+  MoveJoints(robot, OpenHandGoal(chain, q_goal, desc), options.transfer);
   robot.Wait(options.wait_s);
   // The palm pose the human sees: where the encoders put it (not the IK target).
   const Eigen::Isometry3d X_RP_now = chain.TipPose(ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders()));
