@@ -275,6 +275,8 @@ int RunPullBench(const BenchRequest& request) {
                           {"ball_in_reach_before", r.ball_in_reach_before},
                           {"ball_in_reach", r.ball_in_reach},
                           {"planned_drag_m", r.pull.planned_drag_m},
+                          {"sag_offset_rad", r.pull.sag_offset_rad},
+                          {"start_palm_error_m", r.pull.start_palm_error_m},
                           {"planned_lift_m", r.pull.planned_lift_m},
                           {"pull_elevation_deg", r.pull.elevation_rad * 180 / M_PI},
                           {"pull_yaw_deg", r.pull.yaw_rad * 180 / M_PI},

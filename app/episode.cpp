@@ -606,6 +606,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.outcome = control::ToString(p.status);
       s.reason = p.reason;
       s.details["planned_drag_m"] = p.planned_drag_m;
+      s.details["sag_offset_rad"] = p.sag_offset_rad;
+      s.details["start_palm_error_m"] = p.start_palm_error_m;
       s.details["planned_lift_m"] = p.planned_lift_m;
       s.details["action"] = control::ToString(p.action);
       // Where the ball should be now: half the planned drag along the pull from where it was.

@@ -79,7 +79,7 @@ MotionResult AwaitArrival(RobotInterface& robot, const std::vector<std::string>&
 }  // namespace
 
 MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
-                        const MotionOptions& options) {
+                        const MotionOptions& options, const std::function<void()>& each_period) {
   options.Validate();
   const std::vector<std::string> names = robot.JointNames();
   const Eigen::VectorXd start = robot.PositionTargets();
@@ -90,6 +90,7 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
        t += options.command_period) {
     robot.SetPositionTargets(MinJerkPoint(start, target, t, options.duration));
     robot.Wait(options.command_period);
+    if (each_period) each_period();
   }
   robot.SetPositionTargets(target);
   return AwaitArrival(robot, names, moved, options, t0);

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -39,10 +40,12 @@ struct MotionResult {
 /// Moves the named joints (others keep their targets) along a minimum-jerk path to `goal`
 /// [rad] by streaming position targets, then waits until the encoders say the motion of those
 /// joints is done or the timeout passes (a finger squeezing a tool never reaches its target and
-/// must not hold up a gaze or arm motion). Throws std::invalid_argument naming an unknown joint
-/// or a non-finite goal.
+/// must not hold up a gaze or arm motion). `each_period`, when set, is called after every
+/// command period of the trajectory (not of the wait for arrival): e.g. a person holding an
+/// object still while the fingers close on it. Throws std::invalid_argument naming an unknown
+/// joint or a non-finite goal.
 MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, double>& goal,
-                        const MotionOptions& options = {});
+                        const MotionOptions& options = {}, const std::function<void()>& each_period = {});
 
 /// Moves through a sequence of goals (each as MoveJoints takes it: named joints, the others keep
 /// their targets) without stopping at the intermediate ones: the targets run along the

@@ -45,24 +45,28 @@ std::map<std::string, double> OpenHandGoal(const KinematicChain& chain, const Ei
 
 // Position servos sag under gravity and load (steady-state error = torque / kp). Adds the
 // measured error of the chain joints to their targets, a few times, so that the encoders (and
-// hence the hand) end where IK put them. Uses encoders only, as a real robot could.
-void CompensateSag(RobotInterface& robot, const std::vector<std::string>& names, const KinematicChain& chain,
-                   const Eigen::VectorXd& q_model_goal, int iterations, double wait, double max_offset) {
+// hence the hand) end where IK put them. Uses encoders only, as a real robot could. Returns the
+// offsets it left on the targets (model q, zero off the chain), to carry into nearby postures.
+Eigen::VectorXd CompensateSag(RobotInterface& robot, const std::vector<std::string>& names, const KinematicChain& chain,
+                              const Eigen::VectorXd& q_model_goal, int iterations, double wait, double max_offset) {
   std::vector<Eigen::Index> index(chain.num_joints());
   for (int i = 0; i < chain.num_joints(); ++i) {
     index[i] = std::find(names.begin(), names.end(), chain.joint_names()[i]) - names.begin();
   }
+  Eigen::VectorXd offsets = Eigen::VectorXd::Zero(q_model_goal.size());
   for (int k = 0; k < iterations; ++k) {
     const Eigen::VectorXd enc = robot.ReadEncoders();
     Eigen::VectorXd target = robot.PositionTargets();
     for (int i = 0; i < chain.num_joints(); ++i) {
       const double goal = q_model_goal[chain.q_indices()[i]];
-      const double offset = target[index[i]] - goal + (goal - enc[index[i]]);
-      target[index[i]] = goal + std::clamp(offset, -max_offset, max_offset);
+      const double offset = std::clamp(target[index[i]] - goal + (goal - enc[index[i]]), -max_offset, max_offset);
+      target[index[i]] = goal + offset;
+      offsets[chain.q_indices()[i]] = offset;
     }
     robot.SetPositionTargets(target);
     robot.Wait(wait);
   }
+  return offsets;
 }
 
 Eigen::Matrix3d RotZ(double angle) { return Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix(); }
@@ -706,6 +710,9 @@ void PullOptions::Validate() const {
   if (!(max_complete_plans > 0)) fail("max_complete_plans", max_complete_plans, "> 0");
   if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
   if (!(support_clearance_m >= 0)) fail("support_clearance_m", support_clearance_m, ">= 0");
+  if (sag_iterations < 0) fail("sag_iterations", sag_iterations, ">= 0");
+  if (!(sag_wait > 0)) fail("sag_wait", sag_wait, "> 0");
+  if (!(sag_max_offset_rad >= 0)) fail("sag_max_offset_rad", sag_max_offset_rad, ">= 0");
   if (!(start_step_m > 0)) fail("start_step_m", start_step_m, "> 0");
   if (!(max_start_distance_m > 0)) fail("max_start_distance_m", max_start_distance_m, "> 0");
   if (!(min_palm_height_m >= 0)) fail("min_palm_height_m", min_palm_height_m, ">= 0");
@@ -1348,8 +1355,26 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
                            options.transfer.duration / std::max<size_t>(1, plan.transfer.size()));
   FollowWaypoints(robot, chain, plan.transfer, step);
   MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);
-  if (options.on_stage) options.on_stage("above_start");
+  // The servos sag under the tool's weight: a stick's effector came down 1.5 cm below the plan
+  // and dug into the table, and the drag flicked the ball off it. The offsets that put the
+  // encoders on the plan above the start are carried into the descent, the drag and the lift
+  // (the load changes little over those few centimetres).
+  // When the arm is stopped by something (its own body at the edge of the workspace), pushing
+  // harder only adds to the error: then the plan's targets are kept.
   std::string worst;
+  const double error_before = ChainError(robot, chain, q_above, &worst);
+  Eigen::VectorXd sag = CompensateSag(robot, names, chain, q_above, options.sag_iterations, options.sag_wait,
+                                      options.sag_max_offset_rad);
+  if (ChainError(robot, chain, q_above, &worst) > error_before) {
+    sag.setZero();
+    MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);
+  }
+  result.sag_offset_rad = sag.cwiseAbs().maxCoeff();
+  auto offset = [&](std::vector<Eigen::VectorXd> path) {
+    for (Eigen::VectorXd& q : path) q += sag;
+    return path;
+  };
+  if (options.on_stage) options.on_stage("above_start");
   const double arm_error = ChainError(robot, chain, q_above, &worst);
   if (arm_error > options.arm_arrival_tol) {
     result.motion_s = robot.Time() - t0;
@@ -1360,11 +1385,14 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   // The descent stops at each waypoint and waits for the encoders, so the drag starts from rest.
   // Streamed like the other paths, the seeded rake_4 pull (tests/integration/pull_test.cpp) flung
   // the ball off the table during the drag, although the start looked the same in the pictures.
-  for (const Eigen::VectorXd& q : plan.descend) MoveJoints(robot, ChainGoal(chain, q), options.waypoint);
+  for (const Eigen::VectorXd& q : offset(plan.descend)) MoveJoints(robot, ChainGoal(chain, q), options.waypoint);
+  result.start_palm_error_m = (chain.TipPose(ModelQFrom(desc, names, robot.ReadEncoders())).translation() -
+                               chain.TipPose(plan.descend.back()).translation())
+                                  .norm();
   if (options.on_stage) options.on_stage("at_start");
-  FollowWaypoints(robot, chain, plan.drag, options.waypoint);
+  FollowWaypoints(robot, chain, offset(plan.drag), options.waypoint);
   if (options.on_stage) options.on_stage("dragged");
-  FollowWaypoints(robot, chain, plan.lift, options.waypoint);
+  FollowWaypoints(robot, chain, offset(plan.lift), options.waypoint);
   if (options.on_stage) options.on_stage("lifted");
   result.motion_s = robot.Time() - t0;
   const double gap = FingerGap(robot, desc);
@@ -1834,10 +1862,12 @@ HandOverResult HandOver(RobotInterface& robot, const robot::RobotDescription& de
   const Eigen::Isometry3d X_RP_now = chain.TipPose(ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders()));
   result.X_RP = X_RP_now;
   place(X_RP_now);
-  // Close at once (no preshape): the tool lies loose on the palm.
+  // Close at once (no preshape). The person holds the tool where they put it until the fingers
+  // have closed on it, then lets go. Put on the open palm and left loose, the tool rolled as the
+  // fingers swept it: 30-57 deg in the grip, and 8 of 50 random episodes lost it in the pull.
   MotionOptions close = options.hand;
   close.duration = options.close_time;
-  MoveJoints(robot, desc.hand_closed, close);
+  MoveJoints(robot, desc.hand_closed, close, [&] { place(X_RP_now); });
   robot.Wait(options.settle_time);
   const double gap = FingerGap(robot, desc);
   result.holding = gap >= 0.05;

@@ -364,6 +364,12 @@ struct PullOptions {
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
   double empty_hand_tol = 0.05;
   double arm_arrival_tol = 0.08;  // largest arm joint error accepted above the start [rad], > 0
+  /// Servo sag compensation above the start (as GraspOptions'), its offsets then kept through the
+  /// descent, drag and lift. The servos sag under a long tool's weight: a stick's effector came
+  /// down 1.5 cm below the plan (random episode 13), its shaft onto the ball.
+  int sag_iterations = 3;
+  double sag_wait = 0.15;
+  double sag_max_offset_rad = 0.08;
   /// Waypoint solves. Without Ipopt after a failed pre-solve: planning a pull tries hundreds of
   /// poses, most of them out of reach, and Ipopt's rescue (rarely successful, ~0.6 ms an
   /// iteration) made the plan ~9x slower (benchmarks/control_benchmark.cpp BM_PlanPull: 8.6 s ->
@@ -414,6 +420,11 @@ struct PullResult {
   double start_distance_m = 0.0; // horizontal distance object centre -> effector centre at the start [m]
   double plan_ms = 0.0;          // wall time of planning [ms], informational
   double motion_s = 0.0;         // robot time of the whole motion [s]
+  /// Largest servo-sag offset carried into the descent and drag [rad] (PullOptions::sag_iterations),
+  /// and the palm's distance (encoders) from the planned start when the descent ends [m] (NaN
+  /// when the arm never got there).
+  double sag_offset_rad = 0.0;
+  double start_palm_error_m = std::nan("");
 };
 
 /// A planned tool action (PlanPull): the result so far and the right-arm chain postures (model q,
@@ -621,8 +632,10 @@ struct HandOverOptions {
   void Validate() const;
 };
 
-/// The human's part of a hand-over: places the tool in the open hand. Called once by HandOver
-/// while the hand waits open, with the palm pose X_RP where the hand waits (in R). Implemented
+/// The human's part of a hand-over: places the tool in the open hand and holds it there. Called
+/// by HandOver while the hand waits open, with the palm pose X_RP where the hand waits (in R),
+/// and again, with the same pose, every command period while the fingers close (the person
+/// holds the tool still until the hand has it, then lets go). Implemented
 /// by the simulator as an explicit, recorded teleport of the tool's free joint (the only one the
 /// bench permits), by a real setup as a person.
 using PlaceToolInHand = std::function<void(const Eigen::Isometry3d& X_RP)>;
