@@ -331,6 +331,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       const double z1 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
       result.ball_grasp_success = s.ok && z1 - z0 >= 0.03;
       s.details = {{"ball_lift_m_truth", z1 - z0}};
+      if (s.ok && !result.ball_grasp_success && result.failure.empty()) {
+        // The robot believes it holds the ball (its fingers stopped on something): say why the
+        // episode still failed, else result.json showed no failure at all (random episode 10).
+        result.failure = Cat("grasp_ball: the fingers stopped on something, but the ball rose ", z1 - z0,
+                             " m (ground truth; a grasp lifts it >= 0.03 m)");
+      }
     });
   };
 

@@ -10,8 +10,6 @@
 #include <string_view>
 #include <vector>
 
-#include <Eigen/Eigenvalues>
-
 #include "common/check.h"
 #include "control/kinematics.h"
 
@@ -1440,20 +1438,10 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
   const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
   const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
-  // Keep the tool's long axis horizontal: rotate the current palm orientation so that it has no
-  // vertical component, then sample yaws about z_R. That axis is the principal axis of the tool's
-  // points as X_PT holds them, else the grasp axis (where the handle lies when held as planned).
-  // A stick turned 30 deg in the grip and levelled by the grasp axis came down on one end, and
-  // fell from the opened hand across the table and the ball (random episode 24).
-  const bool have_points = options.tool_points_T.cols() > 0;
-  Eigen::Vector3d tool_axis_P = desc.grasp.axis.normalized();
-  if (have_points) {
-    const Eigen::Matrix3Xd centred = options.tool_points_T.colwise() - options.tool_points_T.rowwise().mean();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> principal(centred * centred.transpose());
-    tool_axis_P = X_PT.linear() * principal.eigenvectors().col(2);
-  }
+  // The grasped handle runs along the grasp axis in P; keep it horizontal: rotate the current palm
+  // orientation so that the grasp axis has no vertical component, then sample yaws about z_R.
   const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
-  const Eigen::Vector3d axis_R = X_RP_now.linear() * tool_axis_P;
+  const Eigen::Vector3d axis_R = X_RP_now.linear() * desc.grasp.axis.normalized();
   Eigen::Vector3d axis_flat(axis_R.x(), axis_R.y(), 0.0);
   if (axis_flat.norm() < 1e-6) axis_flat = Eigen::Vector3d::UnitX();
   const Eigen::Matrix3d R_level =
@@ -1463,6 +1451,7 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   // With the tool's points known, the hand may also roll about the (level) handle axis: the tool
   // then turns about its handle, and its lowest point, whichever it is, ends release_height_m
   // above the surface. (Level, unrolled, no yaw planned for any place in 7 of 50 random episodes.)
+  const bool have_points = options.tool_points_T.cols() > 0;
   const std::vector<double> rolls = have_points ? std::vector<double>{0.0, M_PI / 2, -M_PI / 2, M_PI} : std::vector<double>{0.0};
   const int yaws = 12;
   result.poses_sampled = yaws * static_cast<int>(rolls.size());

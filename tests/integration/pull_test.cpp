@@ -280,27 +280,6 @@ TEST(PutDownTest, RejectsEveryYawThatLaysTheToolOverTheBallOrOffTheTable) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("tool_points_T")));
 }
 
-// A rod turned 30 deg in the grip (as tools pivot when they leave the rack or the person lets
-// go) is laid level: its own long axis, not the grasp axis, is made horizontal. Levelled by the
-// grasp axis, a stick came down on one end and fell from the opened hand across the table.
-TEST(PutDownTest, LaysARodTurnedInTheGripLevel) {
-  SettledScene settled("put-down level");
-  const LoadedScene& scene = settled.scene;
-  sim::SimRobot& robot = settled.robot;
-  const Eigen::Vector3d across = scene.robot.grasp.axis.normalized().unitOrthogonal();
-  const Eigen::Isometry3d X_PT = Eigen::Translation3d(scene.robot.grasp.center) *
-                                 Eigen::AngleAxisd(30 * M_PI / 180, across) *
-                                 Eigen::Translation3d(-scene.robot.grasp.center) * PalmGraspFrame(scene.robot);
-  control::PutDownOptions options;
-  options.tool_points_T = RodPoints();
-  const Eigen::Vector3d place(-0.3, 0.05, scene.spec.table.top_z);
-  const control::PutDownResult r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
-  ASSERT_TRUE(r.placed) << r.reason;
-  const Eigen::Matrix3Xd rod = (r.X_RP * X_PT) * options.tool_points_T;
-  EXPECT_LT(rod.row(2).maxCoeff() - rod.row(2).minCoeff(), 0.01) << "the rod's ends differ in height";
-  EXPECT_NEAR(rod.row(2).minCoeff(), place.z() + options.release_height_m, 0.005);
-}
-
 TEST(PutDownTest, RejectsAWayThereThatSweepsTheToolThroughTheBall) {
   SettledScene settled("put-down path check");
   const LoadedScene& scene = settled.scene;
