@@ -48,23 +48,24 @@ std::map<std::string, double> OpenHandGoal(const KinematicChain& chain, const Ei
 // hence the hand) end where IK put them. Uses encoders only, as a real robot could. Returns the
 // offsets it left on the targets (model q, zero off the chain), to carry into nearby postures.
 Eigen::VectorXd CompensateSag(RobotInterface& robot, const std::vector<std::string>& names, const KinematicChain& chain,
-                              const Eigen::VectorXd& q_model_goal, int iterations, double wait, double max_offset) {
+                              const Eigen::VectorXd& q_model_goal, const SagCompensation& sag) {
   std::vector<Eigen::Index> index(chain.num_joints());
   for (int i = 0; i < chain.num_joints(); ++i) {
     index[i] = std::find(names.begin(), names.end(), chain.joint_names()[i]) - names.begin();
   }
   Eigen::VectorXd offsets = Eigen::VectorXd::Zero(q_model_goal.size());
-  for (int k = 0; k < iterations; ++k) {
+  for (int k = 0; k < sag.iterations; ++k) {
     const Eigen::VectorXd enc = robot.ReadEncoders();
     Eigen::VectorXd target = robot.PositionTargets();
     for (int i = 0; i < chain.num_joints(); ++i) {
       const double goal = q_model_goal[chain.q_indices()[i]];
-      const double offset = std::clamp(target[index[i]] - goal + (goal - enc[index[i]]), -max_offset, max_offset);
+      const double offset = std::clamp(target[index[i]] - goal + (goal - enc[index[i]]), -sag.max_offset_rad,
+                                       sag.max_offset_rad);
       target[index[i]] = goal + offset;
       offsets[chain.q_indices()[i]] = offset;
     }
     robot.SetPositionTargets(target);
-    robot.Wait(wait);
+    robot.Wait(sag.wait_s);
   }
   return offsets;
 }
@@ -132,6 +133,12 @@ MotionResult FollowWaypoints(RobotInterface& robot, const KinematicChain& chain,
 
 }  // namespace
 
+void SagCompensation::Validate() const {
+  if (iterations < 0) ThrowInvalid("SagCompensation: iterations = ", iterations, ", expected >= 0");
+  if (!(wait_s > 0)) ThrowInvalid("SagCompensation: wait_s = ", wait_s, ", expected > 0");
+  if (!(max_offset_rad >= 0)) ThrowInvalid("SagCompensation: max_offset_rad = ", max_offset_rad, ", expected >= 0");
+}
+
 void GraspOptions::Validate() const {
   auto fail = [](const char* field, double value, const char* expected) {
     ThrowInvalid("GraspOptions: ", field, " = ", value, " (expected ", expected, ")");
@@ -177,9 +184,7 @@ void GraspOptions::Validate() const {
     fail("fallback_min_approach_cos", fallback_min_approach_cos, "in [-1, 1]");
   }
   if (!(retreat_m >= 0)) fail("retreat_m", retreat_m, ">= 0");
-  if (sag_iterations < 0) fail("sag_iterations", sag_iterations, ">= 0");
-  if (!(sag_wait > 0)) fail("sag_wait", sag_wait, "> 0");
-  if (!(sag_max_offset_rad >= 0)) fail("sag_max_offset_rad", sag_max_offset_rad, ">= 0");
+  sag.Validate();
   if (!(arm_arrival_tol > 0)) fail("arm_arrival_tol", arm_arrival_tol, "> 0");
   transfer.Validate();
   approach.Validate();
@@ -534,8 +539,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // reached exactly; the close decides).
   t0 = robot.Time();
   FollowWaypoints(robot, chain, plan.approach, options.approach);
-  CompensateSag(robot, names, chain, plan.approach.back(), options.sag_iterations, options.sag_wait,
-                options.sag_max_offset_rad);
+  CompensateSag(robot, names, chain, plan.approach.back(), options.sag);
   result.approach_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("at_grasp");
 
@@ -562,8 +566,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // 4. Lift straight up and hold.
   t0 = robot.Time();
   FollowWaypoints(robot, chain, plan.lift, options.lift);
-  CompensateSag(robot, names, chain, plan.lift.back(), options.sag_iterations, options.sag_wait,
-                options.sag_max_offset_rad);
+  CompensateSag(robot, names, chain, plan.lift.back(), options.sag);
   robot.Wait(options.hold_time);
   result.lift_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("lifted");
@@ -710,9 +713,7 @@ void PullOptions::Validate() const {
   if (!(max_complete_plans > 0)) fail("max_complete_plans", max_complete_plans, "> 0");
   if (!(approach_height_m >= 0)) fail("approach_height_m", approach_height_m, ">= 0");
   if (!(support_clearance_m >= 0)) fail("support_clearance_m", support_clearance_m, ">= 0");
-  if (sag_iterations < 0) fail("sag_iterations", sag_iterations, ">= 0");
-  if (!(sag_wait > 0)) fail("sag_wait", sag_wait, "> 0");
-  if (!(sag_max_offset_rad >= 0)) fail("sag_max_offset_rad", sag_max_offset_rad, ">= 0");
+  sag.Validate();
   if (!(start_step_m > 0)) fail("start_step_m", start_step_m, "> 0");
   if (!(max_start_distance_m > 0)) fail("max_start_distance_m", max_start_distance_m, "> 0");
   if (!(min_palm_height_m >= 0)) fail("min_palm_height_m", min_palm_height_m, ">= 0");
@@ -1363,8 +1364,7 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   // harder only adds to the error: then the plan's targets are kept.
   std::string worst;
   const double error_before = ChainError(robot, chain, q_above, &worst);
-  Eigen::VectorXd sag = CompensateSag(robot, names, chain, q_above, options.sag_iterations, options.sag_wait,
-                                      options.sag_max_offset_rad);
+  Eigen::VectorXd sag = CompensateSag(robot, names, chain, q_above, options.sag);
   if (ChainError(robot, chain, q_above, &worst) > error_before) {
     sag.setZero();
     MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);

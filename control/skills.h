@@ -18,6 +18,16 @@
 
 namespace toolbench::control {
 
+/// Servo sag compensation: the position servos sag under gravity and load (steady-state error =
+/// torque / kp); `iterations` times (>= 0) the measured arm joint error is added to the targets,
+/// waiting wait_s [s] (> 0) each, the offsets capped at max_offset_rad [rad] (>= 0).
+struct SagCompensation {
+  int iterations = 3;
+  double wait_s = 0.15;
+  double max_offset_rad = 0.08;
+  void Validate() const;  // throws std::invalid_argument naming the field
+};
+
 /// Options of GraspHandle. The defaults grasp library tools standing on the rack of
 /// scenes/default.json (measured by `toolbench bench --protocol grasp-gt`).
 struct GraspOptions {
@@ -64,12 +74,7 @@ struct GraspOptions {
   /// After the lift, the hand moves this far back toward the robot (horizontally), pulling the
   /// tool off the board, when IK reaches it [m], >= 0.
   double retreat_m = 0.05;
-  /// Servo sag compensation at the grasp and after the lift: iterations (>= 0) of adding the
-  /// measured arm joint error to the targets, waiting sag_wait [s] (> 0) each, offsets capped
-  /// at sag_max_offset_rad [rad] (>= 0).
-  int sag_iterations = 3;
-  double sag_wait = 0.15;
-  double sag_max_offset_rad = 0.08;
+  SagCompensation sag;  // at the grasp and after the lift
   double preshape_time = 0.3;  // hand open -> preshape (thumb opposed) [s], > 0
   double close_time = 0.6;     // ramp preshape -> hand_closed [s], >= 0.5 (a slow squeeze)
   double settle_time = 0.3;    // wait after closing, before lifting [s], >= 0
@@ -364,12 +369,10 @@ struct PullOptions {
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
   double empty_hand_tol = 0.05;
   double arm_arrival_tol = 0.08;  // largest arm joint error accepted above the start [rad], > 0
-  /// Servo sag compensation above the start (as GraspOptions'), its offsets then kept through the
-  /// descent, drag and lift. The servos sag under a long tool's weight: a stick's effector came
-  /// down 1.5 cm below the plan (random episode 13), its shaft onto the ball.
-  int sag_iterations = 3;
-  double sag_wait = 0.15;
-  double sag_max_offset_rad = 0.08;
+  /// Above the start, its offsets then kept through the descent, drag and lift. The servos sag
+  /// under a long tool's weight: a stick's effector came down 1.5 cm below the plan (random
+  /// episode 13), its shaft onto the ball.
+  SagCompensation sag;
   /// Waypoint solves. Without Ipopt after a failed pre-solve: planning a pull tries hundreds of
   /// poses, most of them out of reach, and Ipopt's rescue (rarely successful, ~0.6 ms an
   /// iteration) made the plan ~9x slower (benchmarks/control_benchmark.cpp BM_PlanPull: 8.6 s ->
@@ -420,7 +423,7 @@ struct PullResult {
   double start_distance_m = 0.0; // horizontal distance object centre -> effector centre at the start [m]
   double plan_ms = 0.0;          // wall time of planning [ms], informational
   double motion_s = 0.0;         // robot time of the whole motion [s]
-  /// Largest servo-sag offset carried into the descent and drag [rad] (PullOptions::sag_iterations),
+  /// Largest servo-sag offset carried into the descent and drag [rad] (PullOptions::sag),
   /// and the palm's distance (encoders) from the planned start when the descent ends [m] (NaN
   /// when the arm never got there).
   double sag_offset_rad = 0.0;
