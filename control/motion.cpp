@@ -28,6 +28,14 @@ void MotionOptions::Validate() const {
   require(position_tol > 0, "position_tol", position_tol, "> 0");
   require(velocity_tol > 0, "velocity_tol", velocity_tol, "> 0");
   require(timeout >= 0, "timeout", timeout, ">= 0");
+  require(max_speed >= 0 && std::isfinite(max_speed), "max_speed", max_speed, ">= 0");
+  require(min_duration > 0, "min_duration", min_duration, "> 0");
+}
+
+double MotionOptions::TrajectoryTime(double span, double fixed) const {
+  if (max_speed <= 0) return fixed;
+  constexpr double kMinJerkPeak = 1.875;  // max of dMinJerk/dtau, at tau = 1/2
+  return std::min(fixed, std::max(min_duration, kMinJerkPeak * span / max_speed));
 }
 
 namespace {
@@ -86,9 +94,9 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
   JointMask moved = JointMask::Constant(start.size(), false);
   const Eigen::VectorXd target = Targets(names, start, goal, "MoveJoints", moved);
   const double t0 = robot.Time();
-  for (double t = options.command_period; t < options.duration + 1e-9;
-       t += options.command_period) {
-    robot.SetPositionTargets(MinJerkPoint(start, target, t, options.duration));
+  const double duration = options.TrajectoryTime((target - start).cwiseAbs().maxCoeff(), options.duration);
+  for (double t = options.command_period; t < duration + 1e-9; t += options.command_period) {
+    robot.SetPositionTargets(MinJerkPoint(start, target, t, duration));
     robot.Wait(options.command_period);
     if (each_period) each_period();
   }
@@ -115,7 +123,7 @@ MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::
     at.push_back(at.back() + (vertices.back() - vertices[vertices.size() - 2]).cwiseAbs().maxCoeff());
   }
   const double length = at.back();
-  const double duration = options.duration * static_cast<double>(goals.size());
+  const double duration = options.TrajectoryTime(length, options.duration * static_cast<double>(goals.size()));
   size_t segment = 1;
   for (double t = options.command_period; t < duration + 1e-9; t += options.command_period) {
     const double s = length * MinJerk(t / duration);

@@ -21,13 +21,28 @@ Eigen::VectorXd MinJerkPoint(const Eigen::VectorXd& q0, const Eigen::VectorXd& q
 
 /// How a joint motion is executed and judged done.
 struct MotionOptions {
-  double duration = 1.5;        // trajectory time [s], > 0
+  double duration = 1.5;        // trajectory time [s], > 0 (with max_speed: the longest)
   double command_period = 0.01; // period of target updates [s], > 0
   double position_tol = 0.02;   // |q - q_target| per joint to count as arrived [rad], > 0
   double velocity_tol = 0.05;   // |qdot| per joint to count as still [rad/s], > 0
   double timeout = 2.0;         // extra time allowed after the trajectory ends [s], >= 0
+  /// Peak joint speed [rad/s], >= 0. When > 0 a motion lasts just long enough to keep its
+  /// fastest joint at or below it (a minimum-jerk profile peaks at 1.875 x its mean speed), but
+  /// at least min_duration and at most duration: a short move no longer takes as long as a long
+  /// one. 0: every motion lasts duration.
+  double max_speed = 0.0;
+  double min_duration = 0.3;    // [s], > 0; used with max_speed
+  /// The trajectory time [s] of a motion whose largest joint change (MoveThrough: joint-space
+  /// path length, segments by their largest joint change) is `span` [rad], >= 0, and whose fixed
+  /// time would be `fixed` [s].
+  double TrajectoryTime(double span, double fixed) const;
   void Validate() const;        // throws std::invalid_argument naming the field
 };
+
+/// Peak joint speed [rad/s] of the free motions between tasks (joint-space transfers, the looks
+/// at the table and the rack): 86 deg/s, about what the longest of those transfers (1.5 rad in
+/// a fixed 2 s) already reached, so that the short ones stop taking as long as the long ones.
+inline constexpr double kTransferSpeed = 1.5;
 
 /// Outcome of a joint motion (an expected failure is a result, not an exception).
 struct MotionResult {
@@ -51,7 +66,7 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
 /// their targets) without stopping at the intermediate ones: the targets run along the
 /// joint-space polyline start -> goals[0] -> ... -> goals.back() with one minimum-jerk time law
 /// over its whole length (segments by their largest joint change), lasting `options.duration`
-/// per goal; then waits for arrival at the last goal as MoveJoints does. Stopping at every IK
+/// per goal (with max_speed: at most, see MotionOptions::TrajectoryTime); then waits for arrival at the last goal as MoveJoints does. Stopping at every IK
 /// waypoint of a straight Cartesian line and waiting for the encoders there took longer for the
 /// same peak speed (a grasp's approach through 8 waypoints: 5.5 s of robot time instead of 4.0 s).
 /// An empty sequence does nothing (reached, elapsed 0). Throws std::invalid_argument as

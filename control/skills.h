@@ -85,7 +85,7 @@ struct GraspOptions {
   /// Largest arm joint error [rad] accepted at the pre-grasp before approaching, > 0 (servos sag
   /// under gravity; beyond this the motion counts as not done).
   double arm_arrival_tol = 0.05;
-  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};  // home -> pre-grasp
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0, kTransferSpeed};  // home -> pre-grasp
   /// Fixed boxes of the workspace (table, rack: from the scene file, not perceived) that the
   /// forearm and the open hand must stay obstacle_margin_m [m] (>= 0) clear of on the joint-space
   /// transfer, checked every transfer_check_step_rad (> 0) of joint motion. A transfer that would
@@ -539,6 +539,8 @@ struct PutDownOptions {
   std::vector<Eigen::Vector3d> keep_out_R;
   double keep_out_radius_m = 0.08;
   Eigen::AlignedBox2d support_xy;
+  /// Not speed-limited (MotionOptions::max_speed): carrying the tool faster near the table swept
+  /// it into the ball (3 of 50 random episodes with 1.5 rad/s).
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
   MotionOptions open{0.5, 0.01, 0.02, 0.05, 0.0};
   double settle_time = 0.5;        // wait after opening [s], >= 0
@@ -593,7 +595,7 @@ struct BallGraspOptions {
   /// A direct joint-space move from the put-down swept the hand through the ball in 5 of 50
   /// random episodes, knocking it off the table.
   double clear_height_m = 0.12;
-  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0, kTransferSpeed};
   MotionOptions waypoint{0.4, 0.01, 0.02, 0.05, 0.1};
   double close_time = 0.8;         // [s], > 0
   double hold_time = 0.5;          // [s], >= 0
@@ -626,7 +628,7 @@ struct HandOverOptions {
   /// hand overlapped the rack and the tools beside it and stuck there: the pull's transfer then
   /// did not arrive (4 of 50 random episodes). NaN (the default): point_distance_m toward the tool.
   Eigen::Vector3d receive_at_R = Eigen::Vector3d::Constant(std::nan(""));
-  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
+  MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0, kTransferSpeed};
   MotionOptions hand{0.5, 0.01, 0.02, 0.05, 0.0};
   double wait_s = 1.0;             // the open hand waits this long for the tool [s], >= 0
   double close_time = 0.3;         // [s], > 0

@@ -1,5 +1,6 @@
 #include "control/motion.h"
 
+#include <algorithm>
 #include <functional>
 
 #include <gmock/gmock.h>
@@ -82,6 +83,52 @@ TEST(MotionTest, BadGoalsAreNamed) {
   options.duration = 0;
   EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, options); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("duration")));
+}
+
+TEST(MotionTest, ASpeedLimitedMotionLastsAsLongAsItsLargestJointChangeNeeds) {
+  MotionOptions options;
+  options.duration = 2.0;
+  options.max_speed = 1.5;
+  options.min_duration = 0.3;
+  // 0.4 rad at a 1.5 rad/s peak: 1.875 * 0.4 / 1.5 = 0.5 s; 2 rad would need 2.5 s (capped at
+  // duration); 1 mrad would need 1.25 ms (raised to min_duration). Without max_speed: duration.
+  EXPECT_NEAR(options.TrajectoryTime(0.4, options.duration), 0.5, 1e-12);
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(2.0, options.duration), 2.0);
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(1e-3, options.duration), 0.3);
+  MotionOptions fixed = options;
+  fixed.max_speed = 0;
+  EXPECT_DOUBLE_EQ(fixed.TrajectoryTime(0.4, fixed.duration), 2.0);
+
+  // Executed: the short move arrives after ~0.5 s, the peak commanded speed stays at the limit.
+  class Recorder : public FakeRobot {
+   public:
+    using FakeRobot::FakeRobot;
+    double peak_speed = 0;  // of the commanded targets [rad/s]
+    void SetPositionTargets(const Eigen::VectorXd& q) override {
+      peak_speed = std::max(peak_speed, (q - PositionTargets()).cwiseAbs().maxCoeff() / 0.01);
+      FakeRobot::SetPositionTargets(q);
+    }
+  } robot(2);
+  const MotionResult result = MoveJoints(robot, {{"a", 0.4}, {"b", -0.1}}, options);
+  EXPECT_TRUE(result.reached);
+  EXPECT_GE(result.elapsed, 0.5 - 1e-9);
+  EXPECT_LT(result.elapsed, 0.5 + 0.2);
+  EXPECT_LE(robot.peak_speed, 1.5 + 1e-3);
+  EXPECT_GT(robot.peak_speed, 1.4);
+  // MoveThrough: the whole path's length counts (0.4 + 0.4 rad: 1.0 s, under 2 x duration).
+  const MotionResult path = MoveThrough(robot, {{{"a", 0.0}}, {{"b", 0.3}}}, options);
+  EXPECT_TRUE(path.reached);
+  EXPECT_GE(path.elapsed, 1.0 - 1e-9);
+  EXPECT_LT(path.elapsed, 1.0 + 0.2);
+
+  MotionOptions bad = options;
+  bad.max_speed = -1;
+  EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("max_speed")));
+  bad = options;
+  bad.min_duration = 0;
+  EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("min_duration")));
 }
 
 TEST(MotionTest, MoveThroughPassesEveryGoalWithoutStopping) {
