@@ -129,7 +129,7 @@ Eigen::VectorXd ObservePosture(const robot::RobotDescription& robot, const Eigen
 }
 
 LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target,
-                  bool arm_down) {
+                  bool arm_down, const control::MotionOptions& motion) {
   LookResult result;
   // Gaze starts from the observation posture (torso leaning back a little, for distance).
   std::map<std::string, double> observe = ObserveJoints();
@@ -148,8 +148,23 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
   // the rack (in the home posture it reaches forward-right, right in front of it).
   std::map<std::string, double> goal = observe;
   for (const auto& [joint, value] : result.gaze.joints) goal[joint] = value;
-  result.motion = control::MoveJoints(interface, goal);
+  result.motion = control::MoveJoints(interface, goal, motion);
   return result;
+}
+
+control::MotionResult MoveArmAside(RobotInterface& interface) {
+  const std::vector<std::string> names = interface.JointNames();
+  const auto it = std::find(names.begin(), names.end(), "r_shoulder_roll");
+  if (it == names.end()) ThrowInvalid("MoveArmAside: the robot has no joint 'r_shoulder_roll'");
+  const double roll = interface.PositionTargets()[it - names.begin()];
+  if (roll >= kArmAsideShoulderRollRad) {
+    control::MotionResult none;
+    none.reached = true;
+    return none;
+  }
+  control::MotionOptions motion;
+  motion.max_speed = control::kTransferSpeed;  // up and away from everything
+  return control::MoveJoints(interface, {{"r_shoulder_roll", kArmAsideShoulderRollRad}}, motion);
 }
 
 LookResult LookWithNeck(RobotInterface& interface, const robot::RobotDescription& robot,

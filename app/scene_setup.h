@@ -86,10 +86,21 @@ struct LookResult {
 /// Solves gaze for `p_R_target` and moves torso and neck there with a minimum-jerk trajectory
 /// (thesis Fig. 5.4), the right arm into the observation posture at the same time unless
 /// `arm_down` is false (the arm then keeps its targets: e.g. a hand already cleared of the table,
-/// which the joint-space move down would sweep across it). Never throws for an unreachable gaze:
-/// the result says so.
+/// which the joint-space move down would sweep across it), executed with `motion` (e.g. at
+/// control::kTransferSpeed when the hand is empty and away from everything). Never throws for an
+/// unreachable gaze: the result says so.
 LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robot, const Eigen::Vector3d& p_R_target,
-                  bool arm_down = true);
+                  bool arm_down = true, const control::MotionOptions& motion = {});
+
+/// Swings the right arm sideways, up and out of the camera's view of the table (the shoulder
+/// abducted to at least kArmAsideShoulderRollRad; every other joint keeps its target), when it is
+/// not already that far out. The open hand the put-down lifts clear of the placed tool can leave
+/// the forearm across the view of the table (`bench --protocol random --seed 1`: episodes 11 and
+/// 17 then saw no ball, and their table_after.png showed the forearm), and lowering it beside the
+/// torso would sweep it over the table. Nothing moves (reached, elapsed 0) when the arm is
+/// already out. Throws std::invalid_argument when the robot has no r_shoulder_roll.
+control::MotionResult MoveArmAside(RobotInterface& interface);
+inline constexpr double kArmAsideShoulderRollRad = 1.4;
 
 /// Points the head at `p_R_target` with the neck alone, from the current posture: torso and arms
 /// keep their targets (e.g. to look at a tool held in the hand, which a torso move would carry
