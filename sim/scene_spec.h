@@ -60,11 +60,7 @@ struct PhysicsSpec {
   double timestep = 0.002;           // [s], (0, 0.01]
   std::string cone = "elliptic";     // "pyramidal" or "elliptic"
   double impratio = 10.0;            // >= 1
-  /// >= 0; removes the creep of soft contacts (mujoco#3328). The pass rarely meets its tolerance
-  /// before this cap while a hand holds a tool, so the cap sets its cost: random episode seed 3
-  /// took 17.2 s of wall time with 30 and 12.9 s with 10 (0.44 -> 0.30 s a robot second); with 10,
-  /// and with 5, tools at rest on the rack still hold within 1 mm (WorldTest).
-  int noslip_iterations = 10;
+  int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
   double noslip_tolerance = 1e-6;    // > 0; the noslip pass stops below this improvement (MuJoCo's default)
   double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
 };
