@@ -1654,6 +1654,15 @@ bool BallInReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_m
   return false;
 }
 
+bool BallWithinReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Vector3d& p_RB,
+                     double radius, double margin_m, const BallGraspOptions& options) {
+  if (!(margin_m >= 0 && std::isfinite(margin_m))) ThrowInvalid("BallWithinReach: margin_m = ", margin_m, " (expected >= 0)");
+  if (!p_RB.allFinite()) ThrowInvalid("BallWithinReach: p_RB = (", p_RB.transpose(), ") is not finite");
+  Eigen::Vector3d outward(p_RB.x(), p_RB.y(), 0.0);
+  outward = outward.norm() > 1e-6 ? outward.normalized() : Eigen::Vector3d::UnitX();
+  return BallInReach(desc, q_model, p_RB + margin_m * outward, radius, options);
+}
+
 GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_RB,
                       double radius, const BallGraspOptions& options) {
   options.Validate();

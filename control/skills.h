@@ -612,6 +612,13 @@ struct BallGraspOptions {
 bool BallInReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Vector3d& p_RB,
                  double radius, const BallGraspOptions& options = {});
 
+/// Whether the ball at p_RB would still be in reach (BallInReach) margin_m [m] (>= 0) farther
+/// from the robot's vertical axis: well within reach, not at its edge, where a palm pose
+/// converges but GraspBall's crossing cannot keep the hand above the ball. Throws as
+/// BallInReach, and for a negative or non-finite margin.
+bool BallWithinReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_model, const Eigen::Vector3d& p_RB,
+                     double radius, double margin_m, const BallGraspOptions& options = {});
+
 /// Grasps a ball lying on the table with a whole-hand top grasp: palm above the ball (normal
 /// down), fingers wrapping around it, close, lift. Statuses as GraspHandle's (kGrasped means the
 /// fingers stopped on something; scoring checks the lift from ground truth). Throws

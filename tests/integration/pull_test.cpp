@@ -161,6 +161,33 @@ TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
   EXPECT_GT(ball_R().z() - z0, 0.03) << "the ball is lifted";
 }
 
+// The edge of the arm's reach along a line out from the robot: a ball 1 cm inside it is in reach
+// but not 3 cm within it (the episode pulls such a ball again: at the edge no crossing keeps the
+// hand above it); 6 cm inside, it is.
+TEST(BallGraspTest, ABallAtTheEdgeOfReachIsInReachButNotWithinAMargin) {
+  SceneRequest request;
+  const LoadedScene scene = LoadScene(request);
+  const robot::RobotDescription& desc = scene.robot;
+  const double radius = scene.spec.ball.radius;
+  const double z = scene.spec.table.top_z + radius;
+  const Eigen::Vector3d out = Eigen::Vector3d(-1.0, -0.1, 0.0).normalized();  // forward, a little left
+  auto at = [&](double r) { return Eigen::Vector3d(r * out.x(), r * out.y(), z); };
+  double inside = 0.40, outside = 0.70;  // distance from the robot's axis [m]
+  ASSERT_TRUE(control::BallInReach(desc, desc.HomeQ(), at(inside), radius));
+  ASSERT_FALSE(control::BallInReach(desc, desc.HomeQ(), at(outside), radius));
+  while (outside - inside > 0.002) {
+    const double mid = 0.5 * (inside + outside);
+    (control::BallInReach(desc, desc.HomeQ(), at(mid), radius) ? inside : outside) = mid;
+  }
+  EXPECT_TRUE(control::BallInReach(desc, desc.HomeQ(), at(inside - 0.01), radius));
+  EXPECT_FALSE(control::BallWithinReach(desc, desc.HomeQ(), at(inside - 0.01), radius, 0.03));
+  EXPECT_TRUE(control::BallWithinReach(desc, desc.HomeQ(), at(inside - 0.06), radius, 0.03));
+  EXPECT_EQ(control::BallWithinReach(desc, desc.HomeQ(), at(inside - 0.01), radius, 0.0),
+            control::BallInReach(desc, desc.HomeQ(), at(inside - 0.01), radius));
+  EXPECT_THAT([&] { control::BallWithinReach(desc, desc.HomeQ(), at(0.5), radius, -0.01); },
+              ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("margin_m")));
+}
+
 TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
   SettledScene settled("hand-over");
   const LoadedScene& scene = settled.scene;
