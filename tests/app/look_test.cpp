@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "app/scene_setup.h"
+#include "tests/common/first_order_robot.h"
 
 namespace toolbench::app {
 namespace {
@@ -10,30 +11,7 @@ namespace {
 using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 
-/// Joints follow their targets with a first-order lag (time constant 20 ms).
-class FakeArm : public RobotInterface {
- public:
-  explicit FakeArm(std::vector<std::string> names)
-      : names_(std::move(names)), q_(Eigen::VectorXd::Zero(names_.size())), target_(q_), v_(q_) {}
-  std::vector<std::string> JointNames() const override { return names_; }
-  Eigen::VectorXd ReadEncoders() const override { return q_; }
-  Eigen::VectorXd ReadVelocities() const override { return v_; }
-  void SetPositionTargets(const Eigen::VectorXd& q) override { target_ = q; }
-  Eigen::VectorXd PositionTargets() const override { return target_; }
-  void Wait(double seconds) override {
-    for (double t = 0; t < seconds - 1e-12; t += 0.001) {
-      v_ = (target_ - q_) / 0.02;
-      q_ += v_ * 0.001;
-      time_ += 0.001;
-    }
-  }
-  double Time() const override { return time_; }
-
- private:
-  std::vector<std::string> names_;
-  Eigen::VectorXd q_, target_, v_;
-  double time_ = 0;
-};
+using FakeArm = test::FirstOrderRobot;
 
 TEST(MoveArmAside, AbductsTheShoulderAndKeepsEveryOtherJoint) {
   FakeArm robot({"torso_yaw", "r_shoulder_pitch", "r_shoulder_roll", "r_elbow"});

@@ -6,35 +6,18 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/common/first_order_robot.h"
+
 namespace toolbench::control {
 namespace {
 
 using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 
-/// A first-order servo: the joint approaches its target with time constant tau.
-class FakeRobot : public RobotInterface {
+/// Joints "a" and "b" as first-order servos.
+class FakeRobot : public test::FirstOrderRobot {
  public:
-  explicit FakeRobot(int n) : q_(Eigen::VectorXd::Zero(n)), target_(q_), v_(q_) {}
-  bool a_blocked = false;  // joint "a" cannot move (a finger closed on a handle)
-  std::vector<std::string> JointNames() const override { return {"a", "b"}; }
-  Eigen::VectorXd ReadEncoders() const override { return q_; }
-  Eigen::VectorXd ReadVelocities() const override { return v_; }
-  void SetPositionTargets(const Eigen::VectorXd& q) override { target_ = q; }
-  Eigen::VectorXd PositionTargets() const override { return target_; }
-  void Wait(double seconds) override {
-    for (double t = 0; t < seconds - 1e-12; t += 0.001) {
-      v_ = (target_ - q_) / 0.02;
-      if (a_blocked) v_[0] = 0;
-      q_ += v_ * 0.001;
-      time_ += 0.001;
-    }
-  }
-  double Time() const override { return time_; }
-
- private:
-  Eigen::VectorXd q_, target_, v_;
-  double time_ = 0;
+  explicit FakeRobot(int /*joints: always a and b*/) : FirstOrderRobot({"a", "b"}) {}
 };
 
 TEST(MotionTest, MinJerkProfile) {
@@ -58,7 +41,7 @@ TEST(MotionTest, MoveJointsReachesGoalAndKeepsOthers) {
 
 TEST(MotionTest, AJointThatCannotArriveDoesNotHoldUpTheOthers) {
   FakeRobot robot(2);
-  robot.a_blocked = true;
+  robot.blocked[0] = true;  // "a"
   robot.SetPositionTargets(Eigen::Vector2d(0.5, 0.0));  // "a" squeezes: it never gets there
   MotionOptions options;
   options.timeout = 2.0;
