@@ -539,8 +539,9 @@ struct PutDownOptions {
   std::vector<Eigen::Vector3d> keep_out_R;
   double keep_out_radius_m = 0.08;
   Eigen::AlignedBox2d support_xy;
-  /// Not speed-limited (MotionOptions::max_speed): carrying the tool faster near the table swept
-  /// it into the ball (3 of 50 random episodes with 1.5 rad/s).
+  /// Not speed-limited (MotionOptions::max_speed): it carries the tool near the table and the
+  /// ball. Sped up to 1.5 rad/s together with the looks made holding a tool, 3 of 50 random
+  /// episodes lost the ball off the table (those 3 in the look; this transfer was not isolated).
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0};
   MotionOptions open{0.5, 0.01, 0.02, 0.05, 0.0};
   double settle_time = 0.5;        // wait after opening [s], >= 0
