@@ -11,6 +11,7 @@
 #include "app/bench_pull.h"
 #include "common/check.h"
 #include "common/paths.h"
+#include "sim/scene_spec.h"
 
 namespace toolbench::app {
 
@@ -108,6 +109,7 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
   options.isolate = request.isolate;
   options.run_info = info;
   options.run_info["seed"] = request.seed;
+  options.run_info["scene"] = request.scene_file.empty() ? sim::DefaultScenePath().string() : request.scene_file.string();
   return options;
 }
 

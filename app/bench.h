@@ -19,6 +19,7 @@ struct BenchRequest {
   std::string protocol;           // name of a registered protocol
   std::filesystem::path out_dir;  // results go here (created)
   std::uint64_t seed = 1;         // master seed of the run
+  std::filesystem::path scene_file;  // scene of every case; empty = scenes/default.json
   int shard_index = 0;            // this process runs cases i with i % shard_count == shard_index
   int shard_count = 1;            // >= 1
   int limit = 0;                  // run at most this many cases (0 = all), for quick looks
@@ -35,6 +36,7 @@ struct BenchRequest {
   /// tool's ground-truth handle (pull-gt's case: that tool alone in its cell, the episode's ball)
   /// and score the episode's choice against the best of them (truth.choice_correct).
   bool hindsight = false;
+  bool best_tool_only = false;    // random: EpisodeRequest::best_tool_only (table53 scenes hold one tool)
 };
 
 /// One benchmark protocol: runs its cases, writes `summary.json` (and whatever else it likes) to

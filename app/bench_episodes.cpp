@@ -99,7 +99,9 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   auto run_case = [&](const SweepCase& c) {
     EpisodeRequest episode;
     episode.scene.seed = c.params["scene_seed"].get<std::uint64_t>();
+    episode.scene.scene_file = request.scene_file;
     episode.quiet = true;
+    episode.best_tool_only = request.best_tool_only;
     episode.frames = request.frames;
     episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
     nlohmann::json result = EpisodeJson(RunEpisode(episode));
@@ -112,6 +114,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   nlohmann::json info;
   info["episodes"] = episodes;
   info["hindsight"] = request.hindsight;
+  info["best_tool_only"] = request.best_tool_only;
   ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case));
   return 0;
 }

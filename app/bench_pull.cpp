@@ -250,6 +250,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
 int RunPullBench(const BenchRequest& request) {
   SceneRequest scene_request;
   scene_request.seed = request.seed;
+  scene_request.scene_file = request.scene_file;
   const LoadedScene scene = LoadScene(scene_request);  // built once; the case processes inherit it
   const PullCaseOptions options;
   const std::vector<SweepCase> cases = ToolCellCases(SortedToolNames(scene.library), {options.cell});

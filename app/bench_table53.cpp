@@ -360,6 +360,7 @@ std::vector<std::string> CellsOf(const std::vector<SweepLine>& lines) {
 int RunTable53Bench(const BenchRequest& request) {
   SceneRequest library_request;
   library_request.seed = request.seed;
+  library_request.scene_file = request.scene_file;
   const LoadedScene base = LoadScene(library_request);
   std::vector<std::string> cells;
   if (request.extended) {
@@ -399,6 +400,7 @@ int RunTable53Bench(const BenchRequest& request) {
     sim::GlContext gl;
     SceneRequest scene_request;
     scene_request.seed = DeriveSeed(request.seed, "table53/" + c.id);
+    scene_request.scene_file = request.scene_file;
     scene_request.tools = {tool};
     scene_request.cells = {cell};
     const Capture capture = CaptureFrame(scene_request, CaptureOptions{}, gl);
@@ -425,6 +427,7 @@ int RunTable53Bench(const BenchRequest& request) {
     const std::string cell = c.params["cell"];
     EpisodeRequest episode;
     episode.scene.seed = DeriveSeed(request.seed, "table53/" + c.id);
+    episode.scene.scene_file = request.scene_file;
     episode.scene.tools = {tool};
     episode.scene.cells = {cell};
     episode.quiet = true;
@@ -484,6 +487,7 @@ int RunTable53Bench(const BenchRequest& request) {
 void ReportTable53(const BenchRequest& request, const std::vector<SweepLine>& lines) {
   SceneRequest library_request;
   library_request.seed = request.seed;
+  library_request.scene_file = request.scene_file;
   const std::vector<toollib::ToolModel> library = LoadScene(library_request).library;
   std::map<std::string, std::string> family_of;
   for (const auto& m : library) family_of[m.name] = m.family;

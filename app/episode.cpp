@@ -408,6 +408,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     if (affordance && affordance->info.contains("orientations_deg")) {
       rolls_deg = affordance->info.at("orientations_deg").get<std::vector<double>>();
     }
+    // Each segment's predicted displacement (-inf: no usable analysis), and the segments by it,
+    // best first: the grasp falls back down this list when a handle is out of reach.
+    std::vector<double> predicted(analysis.tools.size(), -std::numeric_limits<double>::infinity());
+    std::vector<int> ranking;
     run_stage("choose_tool", [&](StageRecord& s) {
       double best = -std::numeric_limits<double>::infinity();
       nlohmann::json per_tool = nlohmann::json::array();
@@ -438,11 +442,15 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         }
         entry["predicted_displacement_m"] = std::isfinite(p) ? nlohmann::json(p) : nlohmann::json(nullptr);
         per_tool.push_back(entry);
+        predicted[i] = p;
+        if (std::isfinite(p)) ranking.push_back(static_cast<int>(i));
         if (p > best) {
           best = p;
           result.chosen_segment = static_cast<int>(i);
         }
       }
+      std::stable_sort(ranking.begin(), ranking.end(),
+                       [&](int a, int b) { return predicted[static_cast<size_t>(a)] > predicted[static_cast<size_t>(b)]; });
       result.chosen_tool = analysis.tools[static_cast<size_t>(result.chosen_segment)].model;
       result.predicted_displacement_m = best;
       s.ok = true;
@@ -452,33 +460,39 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"note", result.choice_note},
                    {"tools", per_tool}};
     });
-    if (!request.out_dir.empty()) {
-      cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
-    }
-    const perception::ToolAnalysis& tool = analysis.tools[static_cast<size_t>(result.chosen_segment)];
+    TOOLBENCH_DEMAND(!ranking.empty());  // perceive_tools found a tool, and each has a finite prediction
+    // The tool the robot goes for (select_tool): its analysis, its recognised library model, and
+    // which simulated tool it is, for scoring and the hand-over only: the one whose true handle
+    // centre is nearest the perceived one (tool origins mislead: a stick fitted end over end has
+    // its origin 35 cm away, nearer another tool's).
+    const perception::ToolAnalysis* tool = nullptr;
     const toollib::ToolModel* model = nullptr;
-    for (const auto& m : scene.library) {
-      if (m.name == tool.model) model = &m;
-    }
-    TOOLBENCH_DEMAND(model != nullptr);
-
-    // Which simulated tool the robot went for: for scoring and the hand-over only. The one whose
-    // true handle centre is nearest the perceived one (tool origins mislead: a stick fitted end
-    // over end has its origin 35 cm away, nearer another tool's).
     std::string tool_body;
-    double nearest = 1e9;
-    for (const auto& placed : scene.composed.tools) {
-      const auto placed_model = std::find_if(scene.library.begin(), scene.library.end(),
-                                             [&](const toollib::ToolModel& m) { return m.name == placed.name; });
-      TOOLBENCH_DEMAND(placed_model != scene.library.end());
-      const Eigen::Vector3d handle_R = X_RW * world.ground_truth().Pose(placed.body) * placed_model->handle.center;
-      const double d = (handle_R - tool.handle.center).norm();
-      if (d < nearest) {
-        nearest = d;
-        tool_body = placed.body;
+    auto select_tool = [&](int segment) {
+      result.chosen_segment = segment;
+      tool = &analysis.tools[static_cast<size_t>(segment)];
+      result.chosen_tool = tool->model;
+      result.predicted_displacement_m = predicted[static_cast<size_t>(segment)];
+      model = nullptr;
+      for (const auto& m : scene.library) {
+        if (m.name == tool->model) model = &m;
       }
-    }
-    result.truth["chosen_tool_body"] = tool_body;
+      TOOLBENCH_DEMAND(model != nullptr);
+      double nearest = 1e9;
+      for (const auto& placed : scene.composed.tools) {
+        const auto placed_model = std::find_if(scene.library.begin(), scene.library.end(),
+                                               [&](const toollib::ToolModel& m) { return m.name == placed.name; });
+        TOOLBENCH_DEMAND(placed_model != scene.library.end());
+        const Eigen::Vector3d handle_R = X_RW * world.ground_truth().Pose(placed.body) * placed_model->handle.center;
+        const double d = (handle_R - tool->handle.center).norm();
+        if (d < nearest) {
+          nearest = d;
+          tool_body = placed.body;
+        }
+      }
+      result.truth["chosen_tool_body"] = tool_body;
+    };
+    select_tool(result.chosen_segment);
 
     // ---- 5. Grasp the handle; hand-over when out of reach. ----
     Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
@@ -507,28 +521,59 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       return h;
     };
     run_stage("grasp_tool", [&](StageRecord& s) {
-      const double z0 = world.ground_truth().Pose(tool_body).translation().z();
       // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
       // on the side of the hand from which the wrist can point it forward and down; the whole
       // perceived handle (1 cm from its ends) when none of those is reachable. The effector is
       // where the recognised model puts it in the perceived tool pose.
-      const Eigen::Vector3d p_R_effector = tool.X_RT * model->effector.center;
       control::GraspOptions grasp_options;
       grasp_options.obstacles = WorkspaceObstacles(spec);
       grasp_options.on_stage = [&](const char* stage) { stage_frame(std::string("grasp_") + stage); };
-      const control::GraspResult g = control::GraspToolForAction(
-          robot, desc, tool.handle.X_FH, p_R_effector, FreeHandleSlide(desc, tool.handle.length), grasp_options);
+      auto grasp = [&]() {
+        const Eigen::Vector3d p_R_effector = tool->X_RT * model->effector.center;
+        return control::GraspToolForAction(robot, desc, tool->handle.X_FH, p_R_effector,
+                                           FreeHandleSlide(desc, tool->handle.length), grasp_options);
+      };
+      // A handle out of reach (no palm pose, or no complete path: nothing has moved) sends the
+      // robot to the next tool down the ranking before it asks for help (unless
+      // request.best_tool_only): from its ground-truth handle nearly every library tool pulls the
+      // ball into reach (pull-gt, seed 1: 29 of 32), and the prediction ranks them weakly, so a
+      // tool the robot can take itself is worth more than the best one it cannot.
+      const int first_choice = result.chosen_segment;
+      nlohmann::json tried = nlohmann::json::array();
+      double plan_ms = 0.0;
+      int candidates = 0;
+      control::GraspResult g;
+      control::GraspResult first;
+      double z0 = 0.0;
+      for (size_t k = 0; k < ranking.size(); ++k) {
+        if (k > 0 && request.best_tool_only) break;
+        select_tool(ranking[k]);
+        z0 = world.ground_truth().Pose(tool_body).translation().z();
+        g = grasp();
+        plan_ms += g.plan_ms;
+        candidates += g.candidates;
+        tried.push_back({{"segment", ranking[k]}, {"model", tool->model}, {"status", control::ToString(g.status)},
+                         {"reason", g.reason}});
+        if (k == 0) first = g;
+        if (g.status != control::GraspStatus::kUnreachable && g.status != control::GraspStatus::kIkFailed) break;
+      }
+      if (g.status == control::GraspStatus::kUnreachable || g.status == control::GraspStatus::kIkFailed) {
+        // No tool within reach: the hand-over brings the first choice.
+        select_tool(first_choice);
+        z0 = world.ground_truth().Pose(tool_body).translation().z();
+        g = first;
+      }
       s.outcome = control::ToString(g.status);
       s.reason = g.reason;
       if (g.status == control::GraspStatus::kGrasped) {
         // The tool in the palm as planned: the perceived tool pose seen from the grasp pose.
-        X_PT = g.X_RP_grasp.inverse() * tool.X_RT;
+        X_PT = g.X_RP_grasp.inverse() * tool->X_RT;
         holding = true;
       } else {
         // Thesis Fig. 5.20. The thesis asks for help when the tool is out of reach; the robot
         // here also asks when it could not get its hand there (blocked on the way, no complete
         // path) or closed it on nothing: the episode goes on, recorded as assisted.
-        const control::HandOverResult h = hand_over_tool(tool.handle.center);
+        const control::HandOverResult h = hand_over_tool(tool->handle.center);
         stage_frame("hand_over");
         holding = h.holding;
         s.outcome = "handed_over";
@@ -542,18 +587,23 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"slide_m", g.slide_m},
                    {"axis_flipped", g.axis_flipped},
                    {"roll_deg", g.roll_rad * 180 / M_PI},
-                   {"candidates", g.candidates},
+                   {"candidates", candidates},
+                   {"first_choice", analysis.tools[static_cast<size_t>(first_choice)].model},
+                   {"tools_tried", tried},
                    {"paths_blocked", g.paths_blocked},
                    {"last_blocked", g.last_blocked},
                    {"transfer_raised", g.transfer_raised},
                    {"regrasps", g.regrasps},
                    {"regrasp_reason", g.regrasp_reason},
-                   {"plan_ms", g.plan_ms},
+                   {"plan_ms", plan_ms},
                    {"robot_s", {{"transfer", g.transfer_s},
                                 {"approach", g.approach_s},
                                 {"close", g.close_s},
                                 {"lift", g.lift_s}}}};
     });
+    if (!request.out_dir.empty()) {  // the tool the robot went for, after any fallback
+      cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
+    }
     if (!holding) return finish();
 
     // ---- 5b. Look at the tool in the hand: it may have pivoted in the grip as it came up. ----
@@ -615,7 +665,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // The same model for the tool as it is actually held.
       const Eigen::Isometry3d X_GT = PalmGraspFrame(desc).inverse() * X_PT;
       result.predicted_in_hand_m =
-          affordance->Predict(request.action, AffordanceFeatures(tool.parts, tool.handle.part, tool.features, X_GT))
+          affordance->Predict(request.action, AffordanceFeatures(tool->parts, tool->handle.part, tool->features, X_GT))
               .displacement_m;
     }
 

@@ -30,6 +30,9 @@ struct EpisodeRequest {
   /// out_dir/frames (for debugging; each costs ~0.2 s).
   bool frames = false;
   bool quiet = false;             // no progress lines, no summary on stdout
+  /// Ask for a hand-over of the best-predicted tool when its handle is out of reach (the thesis's
+  /// Algorithm 6), instead of grasping the next best tool that is within reach.
+  bool best_tool_only = false;
   bool noise = true;              // sensor noise model on
 };
 

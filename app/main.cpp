@@ -141,6 +141,9 @@ int main(int argc, char** argv) {
                     "Write overview and side-view PNGs after each stage of the tool grasp and the action to "
                     "--out/frames (debugging)");
   episode->add_flag("--quiet", episode_request.quiet, "No progress lines and no summary (for scripts)");
+  episode->add_flag("--best-tool-only", episode_request.best_tool_only,
+                    "Ask for a hand-over of the best-predicted tool when its handle is out of reach (thesis Alg. 6) "
+                    "instead of grasping the next best tool within reach");
   episode->add_flag(
       "--no-noise", [&](std::int64_t) { episode_request.noise = false; },
       "Ideal images: switch the sensor noise model off");
@@ -243,6 +246,8 @@ int main(int argc, char** argv) {
     bench->add_option("--protocol", bench_request.protocol, "Protocol to run:" + protocols)->required();
     bench->add_option("--out", bench_request.out_dir, "Output folder")->required();
     AddSeedOption(bench, bench_request.seed);
+    bench->add_option("--scene", bench_request.scene_file, "Scene file (JSON) of every case; default: scenes/default.json in the source tree")
+        ->check(CLI::ExistingFile);
     bench->add_option("--shard", shard, "Run slice i of N (i/N, 0-based); merge the results afterwards")
         ->capture_default_str();
     bench->add_option("--limit", bench_request.limit, "Run at most this many cases (0 = all)")
@@ -274,6 +279,9 @@ int main(int argc, char** argv) {
                     "Write overview PNGs of each case's stages to --out/frames (grasp-gt, pull-gt), each "
                     "episode's images to --out/episodes (table53 --episodes), or each random episode's "
                     "grasp and action stages to --out/episodes/N/frames (random)");
+    bench->add_flag("--best-tool-only", bench_request.best_tool_only,
+                    "random: episodes ask for a hand-over of the best-predicted tool when its "
+                    "handle is out of reach instead of grasping the next best tool within reach");
     bench->add_flag("--hindsight", bench_request.hindsight,
                     "random: also pull with every tool of each episode's rack from its ground-truth handle "
                     "and score the choice against the best in hindsight (about 10 s more per tool)");

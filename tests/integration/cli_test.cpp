@@ -7,6 +7,7 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include "sim/scene_spec.h"
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -163,6 +164,35 @@ TEST(CliTest, PerceiveBadInputIsNamed) {
   EXPECT_THAT(r.output, HasSubstr("/nonexistent/c.yml.gz"));
 }
 
+TEST(CliTest, BenchRunsItsCasesInTheSceneGiven) {
+  // The default scene with the rack moved 3 m to the robot's right: no handle is within reach.
+  const auto dir = TempDir("bench_scene");
+  std::ifstream default_scene(toolbench::sim::DefaultScenePath());
+  nlohmann::json scene = nlohmann::json::parse(default_scene);
+  scene["name"] = "far_rack";
+  scene["rack"]["origin"][1] = 3.0;
+  std::ofstream(dir / "far_rack.json") << scene.dump(1);
+  const std::string common = "bench --protocol grasp-gt --filter '^stick_1/pos2$' ";
+  const CliRun near = Toolbench(common + "--out " + (dir / "near").string());
+  ASSERT_EQ(near.code, 0) << near.output;
+  const CliRun far = Toolbench(common + "--scene " + (dir / "far_rack.json").string() + " --out " + (dir / "far").string());
+  ASSERT_EQ(far.code, 0) << far.output;
+  auto first_result = [](const std::filesystem::path& run) {
+    std::ifstream in(run / "results.jsonl");
+    std::string line;
+    std::getline(in, line);
+    return nlohmann::json::parse(line)["result"];
+  };
+  EXPECT_EQ(first_result(dir / "near")["grasp_status"], "grasped");
+  EXPECT_EQ(first_result(dir / "far")["grasp_status"], "unreachable");
+  std::ifstream info(dir / "far" / "run.json");
+  EXPECT_EQ(nlohmann::json::parse(info)["scene"], (dir / "far_rack.json").string());
+  const CliRun missing = Toolbench(common + "--scene " + (dir / "no_such_scene.json").string() + " --out " +
+                                   (dir / "missing").string());
+  EXPECT_NE(missing.code, 0);
+  EXPECT_THAT(missing.output, HasSubstr("no_such_scene.json"));
+}
+
 TEST(CliTest, Table53BenchScoresCasesAndWritesTheReport) {
   const auto dir = TempDir("table53");
   // Two cases of the sweep (hammer_1 in pos1 and pos2), ours and the thesis configuration.
@@ -222,6 +252,52 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     EXPECT_FALSE(result["chosen_tool"].get<std::string>().empty());
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "table.png"));
+}
+
+// Random episode 2 of seed 1 (bench --protocol random --seed 1): three tools on the rack, and the
+// one predicted best (a hook standing upside down, rot2) has its handle out of reach.
+constexpr const char* kUnreachableFirstChoiceSeed = "1267194658511675468";
+
+nlohmann::json GraspStage(const std::filesystem::path& dir) {
+  std::ifstream in(dir / "result.json");
+  const nlohmann::json result = nlohmann::json::parse(in);
+  for (const auto& s : result["stages"]) {
+    if (s["name"] == "grasp_tool") return s;
+  }
+  ADD_FAILURE() << "no grasp_tool stage in " << (dir / "result.json");
+  return nlohmann::json::object();
+}
+
+TEST(CliTest, AnEpisodeTakesTheNextBestToolWhenTheFirstChoiceIsOutOfReach) {
+  const auto dir = TempDir("episode_fallback");
+  const CliRun r = Toolbench(std::string("episode --quiet --seed ") + kUnreachableFirstChoiceSeed + " --out " +
+                             dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json grasp = GraspStage(dir);
+  const nlohmann::json& tried = grasp["details"]["tools_tried"];
+  ASSERT_GE(tried.size(), 2u) << grasp.dump(1);
+  // The scene exercises the fallback only while the first choice is out of reach.
+  ASSERT_EQ(tried[0]["status"], "unreachable") << tried.dump(1);
+  EXPECT_EQ(grasp["details"]["first_choice"], tried[0]["model"]);
+  std::ifstream in(dir / "result.json");
+  const nlohmann::json result = nlohmann::json::parse(in);
+  EXPECT_EQ(result["chosen_tool"], tried.back()["model"]);
+  EXPECT_NE(result["chosen_tool"], tried[0]["model"]);
+  EXPECT_TRUE(result["grasp_success"].get<bool>()) << grasp.dump(1);
+  EXPECT_FALSE(result["assisted"].get<bool>());
+
+  // As the thesis does: the best-predicted tool, handed over.
+  const auto thesis_dir = TempDir("episode_fallback_thesis");
+  const CliRun t = Toolbench(std::string("episode --quiet --best-tool-only --seed ") + kUnreachableFirstChoiceSeed +
+                             " --out " + thesis_dir.string());
+  ASSERT_EQ(t.code, 0) << t.output;
+  const nlohmann::json thesis_grasp = GraspStage(thesis_dir);
+  EXPECT_EQ(thesis_grasp["details"]["tools_tried"].size(), 1u);
+  EXPECT_EQ(thesis_grasp["outcome"], "handed_over");
+  std::ifstream thesis_in(thesis_dir / "result.json");
+  const nlohmann::json thesis = nlohmann::json::parse(thesis_in);
+  EXPECT_EQ(thesis["chosen_tool"], tried[0]["model"]);
+  EXPECT_TRUE(thesis["assisted"].get<bool>());
 }
 
 TEST(CliTest, EpisodeBadInputIsNamed) {
