@@ -194,6 +194,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   if (options.inspect_held_tool) frame("1b_inspected");  // its own GL context: after the eye's is gone
   out.ball_start_R = ball_R();
   control::PullOptions pull_options = options.pull;
+  pull_options.support_area = TableTopArea(scene.spec);
   // Where the tool really is at the start of the drag (ground truth), against where the plan put
   // it, and the palm from the encoders against the tool: sag of the arm vs slip in the hand.
   int stage_index = 0;
@@ -286,6 +287,7 @@ int RunPullBench(const BenchRequest& request) {
                           {"pull_candidates_blocked", r.pull.candidates_blocked},
                           {"pull_start_distance_m", r.pull.start_distance_m},
                           {"pull_turn_deg", r.pull.pull_turn_rad * 180 / M_PI},
+                          {"working_cos", r.pull.working_cos},
                           {"pull_plan_ms", r.pull.plan_ms},
                           {"pull_motion_s", r.pull.motion_s},
                           {"grasp_roll_deg", r.grasp.roll_rad * 180 / M_PI},

@@ -402,6 +402,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 4. Predict each tool's effect and choose. ----
     control::PullOptions pull_options;
     pull_options.action = *action;
+    pull_options.support_area = TableTopArea(spec);
     // In-hand rolls the model was explored with: the grasp (and so the roll) is not planned yet,
     // so a tool's expected effect is its mean over them.
     std::vector<double> rolls_deg{0.0, 90.0, 180.0, 270.0};
@@ -695,6 +696,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details["start_palm_error_m"] = p.start_palm_error_m;
       s.details["planned_lift_m"] = p.planned_lift_m;
       s.details["action"] = control::ToString(p.action);
+      s.details["pull_dir_R"] = Vec3(p.pull_dir_R);
+      s.details["pull_turn_deg"] = p.pull_turn_rad * 180 / M_PI;
+      s.details["working_cos"] = p.working_cos;
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
       return p.status;

@@ -109,6 +109,10 @@ std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec)
   return out;
 }
 
+Eigen::AlignedBox2d TableTopArea(const sim::SceneSpec& spec) {
+  return {spec.table.center - spec.table.size / 2, spec.table.center + spec.table.size / 2};
+}
+
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec) {
   const Eigen::Isometry3d X_RK = sim::RackPose(spec.rack);
   return X_RK * Eigen::Vector3d(0.0, 0.0, 0.24);

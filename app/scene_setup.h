@@ -70,6 +70,10 @@ InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry
 /// obstacles for the arm's planning: known from the scene file, like the table height.
 std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec);
 
+/// The table top in the horizontal plane of R (for PullOptions::support_area): known from the
+/// scene file, like the table height.
+Eigen::AlignedBox2d TableTopArea(const sim::SceneSpec& spec);
+
 /// Point the robot looks at to see the rack: the middle of the rack, a little up the board.
 Eigen::Vector3d RackViewTarget(const sim::SceneSpec& spec);
 

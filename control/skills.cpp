@@ -699,6 +699,24 @@ PalmPath PlanPalmPath(const KinematicChain& chain, const Eigen::VectorXd& q_now,
   return out;
 }
 
+// How far an object of `radius` at p may move along the unit direction u (both horizontal, in R)
+// before its centre comes closer than radius + margin to an edge of `area` (+inf for an empty,
+// unbounded area). An object that starts nearer an edge than that (the ball lies 5-7 cm from the
+// table's far edge) may come kEdgeSlackM closer to it, never closer than its radius.
+double DistanceToEdge(const Eigen::AlignedBox2d& area, double radius, double margin, const Eigen::Vector2d& p,
+                      const Eigen::Vector2d& u) {
+  constexpr double kEdgeSlackM = 0.02;
+  if (area.isEmpty()) return std::numeric_limits<double>::infinity();
+  double t = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 2; ++i) {
+    if (std::abs(u[i]) < 1e-12) continue;
+    const double to_edge = u[i] > 0 ? area.max()[i] - p[i] : p[i] - area.min()[i];
+    const double closest = std::max(radius, std::min(radius + margin, to_edge - kEdgeSlackM));
+    t = std::min(t, (to_edge - closest) / std::abs(u[i]));
+  }
+  return std::max(0.0, t);
+}
+
 }  // namespace
 
 void PullOptions::Validate() const {
@@ -708,6 +726,11 @@ void PullOptions::Validate() const {
   if (!(clearance_m >= 0)) fail("clearance_m", clearance_m, ">= 0");
   if (!std::isfinite(height_offset_m)) fail("height_offset_m", height_offset_m, "finite");
   if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
+  if (!(support_edge_margin_m >= 0)) fail("support_edge_margin_m", support_edge_margin_m, ">= 0");
+  if (!support_area.isEmpty() && !(support_area.min().allFinite() && support_area.max().allFinite())) {
+    ThrowInvalid("PullOptions: support_area = [", support_area.min().transpose(), "] .. [",
+                 support_area.max().transpose(), "] (expected finite corners, or an empty box)");
+  }
   if (!(max_drag_joint_step_rad > 0)) fail("max_drag_joint_step_rad", max_drag_joint_step_rad, "> 0");
   if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
   if (!(max_complete_plans > 0)) fail("max_complete_plans", max_complete_plans, "> 0");
@@ -1087,9 +1110,22 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   double best_error = std::numeric_limits<double>::infinity();
   bool any_feasible = false;
   bool planned = false;
+  bool any_on_support = false;  // a sampled orientation kept the object on support_area
   for (const double turn : turns) {
   const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
   const Eigen::Vector3d out = Eigen::AngleAxisd(-turn, up) * out_straight;
+  // The drag along u, cut where the object would come too near the edge of its support were it
+  // pushed straight along u (each orientation below cuts it again for where its working side
+  // pushes the object).
+  const double min_pull_m = options.min_pull_fraction * options.pull_length_m;
+  const double pull_length =
+      std::min(options.pull_length_m, DistanceToEdge(options.support_area, object_radius, options.support_edge_margin_m,
+                                                   p_RO.head<2>(), u.head<2>()));
+  if (pull_length < min_pull_m) {
+    last_failure = Cat("a drag turned ", turn * 180 / M_PI, " deg would take the object off its support after ",
+                       std::max(0.0, pull_length), " m");
+    continue;
+  }
   const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
   const Eigen::Vector3d w = up.cross(u);  // horizontal, across the pull line
   // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
@@ -1157,6 +1193,8 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     Eigen::Isometry3d X_RT;
     double elevation, yaw, roll;
     IkResult ik;
+    double pull_length;  // drag for this orientation [m] (support_area)
+    double working_cos;  // working side's horizontal direction . u
   };
   std::vector<Candidate> feasible;
   for (double el = options.min_elevation_rad; el <= options.max_elevation_rad + 1e-9; el += options.elevation_step_rad) {
@@ -1173,6 +1211,24 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
             F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
             Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
             X_RT.linear() = F_R * F_T.transpose();
+            // A ball pushed by a flat working side moves along that side's normal rather than
+            // along u (it rolls along the face): drag d moves it d (n . u) along n, the
+            // horizontal working direction, and the drag is cut for that path too. Below
+            // n . u = 0.1 only the cut along u applies (a hook meets the ball with its tip:
+            // hook_1 pulls it 7 cm into reach with n at 88 deg from u, PullFromRackTest).
+            const Eigen::Vector2d n_h = (X_RT.linear() * d_T).head<2>();
+            const double along = n_h.norm() > 1e-6 ? n_h.normalized().dot(u.head<2>()) : 0.0;
+            double length = pull_length;
+            if (!options.support_area.isEmpty() && along > 0.1) {
+              length = std::min(length, DistanceToEdge(options.support_area, object_radius,
+                                                       options.support_edge_margin_m, p_RO.head<2>(), n_h.normalized()) / along);
+              if (length < min_pull_m) {
+                ++result.candidates_blocked;
+                last_failure = Cat("the working side would push the object off its support after ", length, " m");
+                continue;
+              }
+            }
+            any_on_support = true;
             Eigen::Vector3d p_RE_start;
             if (!place_start(X_RT.linear(), &p_RE_start)) {
               ++result.candidates_blocked;
@@ -1190,7 +1246,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
               ++result.candidates_blocked;
               continue;
             }
-            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik)});
+            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik), length, along});
           }
         }
       }
@@ -1252,19 +1308,20 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       continue;
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
-    X_RP_end.translation() += options.pull_length_m * u;
+    X_RP_end.translation() += c.pull_length * u;
     drag.clear();
     Eigen::VectorXd q_drag = descend.back();
     const bool drag_complete = CartesianPath(solver, X_RP_start, X_RP_end, 0.0, 1.0, options.drag_waypoints,
                                              options.max_drag_joint_step_rad, 2, left_arm_clear, &q_drag, &drag);
     // How far along the pull the planned drag goes (halved steps make waypoints uneven).
-    const double drag_m = drag_complete ? options.pull_length_m
+    const double drag_m = drag_complete ? c.pull_length
                           : drag.empty()
                               ? 0.0
                               : std::clamp((chain.TipPose(drag.back()).translation() - X_RP_start.translation()).dot(u),
-                                           0.0, options.pull_length_m);
-    if (drag.size() < 2 || drag_m < options.pull_length_m * min_drag / options.drag_waypoints - 1e-6) {
-      last_failure = Cat("drag IK ended after ", drag_m, " of ", options.pull_length_m, " m");
+                                           0.0, c.pull_length);
+    if (drag.size() < 2 || drag_m < c.pull_length * min_drag / options.drag_waypoints - 1e-6 ||
+        drag_m < min_pull_m - 1e-6) {
+      last_failure = Cat("drag IK ended after ", drag_m, " of ", c.pull_length, " m");
       continue;
     }
     Eigen::Isometry3d X_RP_last = X_RP_start;
@@ -1291,7 +1348,9 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       best = {above.q, transfer, descend, drag, lift, drag_m};
       chosen = &c;
     }
-    if (drag_complete || complete >= options.max_complete_plans) break;
+    // A drag cut short by the support is complete, but another orientation may push the object
+    // along a longer path on it.
+    if ((drag_complete && c.pull_length >= pull_length - 1e-9) || complete >= options.max_complete_plans) break;
   }
   if (chosen != nullptr) {
     q_above = std::move(best.q_above);
@@ -1307,6 +1366,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     result.roll_rad = chosen->roll;
     result.pull_dir_R = u;
     result.pull_turn_rad = turn;
+    result.working_cos = chosen->working_cos;
     const Eigen::Vector3d p_RE = chosen->X_RT * effector.center_T;
     result.start_distance_m = Eigen::Vector2d(p_RE.x() - p_RO.x(), p_RE.y() - p_RO.y()).norm();
     planned = true;
@@ -1314,6 +1374,13 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   }
   }  // turns
   result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
+  if (!any_on_support) {
+    result.status = PullStatus::kUnreachable;
+    result.reason = Cat("every drag direction within ", options.max_pull_turn_rad * 180 / M_PI,
+                        " deg of the action's would take the object at ", p_RO.transpose(),
+                        " m in R off its support (", options.support_edge_margin_m, " m margin)");
+    return plan;
+  }
   if (!any_feasible) {
     result.status = PullStatus::kUnreachable;
     result.reason = Cat("no sampled tool orientation puts the effector behind the object (", result.candidates,

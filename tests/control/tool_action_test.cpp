@@ -126,6 +126,63 @@ TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
   }
 }
 
+// The pull's drag stops short of the edge of the object's support (the table top); with too
+// little room left the direction is not tried.
+TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
+  const robot::RobotDescription& desc = *robot_;
+  Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
+  X_PT.linear() =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
+  X_PT.translation() = desc.grasp.center;
+  ToolEffector effector;
+  effector.center_T = Eigen::Vector3d(0.0, 0.0, 0.30);
+  effector.direction_T = Eigen::Vector3d::UnitX();
+  effector.half_thickness_m = 0.01;
+  PullOptions options;
+  options.min_elevation_rad = 20.0 * M_PI / 180.0;
+  options.max_elevation_rad = 40.0 * M_PI / 180.0;
+  options.elevation_step_rad = 10.0 * M_PI / 180.0;
+  options.max_yaw_rad = 40.0 * M_PI / 180.0;
+  options.max_roll_rad = 60.0 * M_PI / 180.0;
+  options.max_pull_turn_rad = 0.0;
+  options.pull_length_m = 0.10;
+  const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
+  constexpr double kRadius = 0.035;
+  const Eigen::Vector3d dir = ActionDirection(ToolAction::kPull, p_RO);
+  // The table's near edge 6 cm beyond the ball's inset (radius + margin) along x: a drag of
+  // 0.06 / dir.x() along the pull direction is left.
+  const double inset = kRadius + options.support_edge_margin_m;
+  options.support_area = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.06, 1.0));
+  const double room = 0.06 / dir.x();
+  const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
+  ASSERT_TRUE(plan.complete()) << plan.result.reason;
+  EXPECT_LE(plan.result.planned_drag_m, room + 1e-9);
+  EXPECT_GE(plan.result.planned_drag_m, options.min_pull_fraction * options.pull_length_m);
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  const Eigen::Vector3d p_start = (chain.TipPose(plan.drag.front()) * X_PT) * effector.center_T;
+  const Eigen::Vector3d p_end = (chain.TipPose(plan.drag.back()) * X_PT) * effector.center_T;
+  EXPECT_LT((p_end - p_start).dot(dir), room + 0.01);
+  // Where the working side pushes the ball (along its horizontal normal n, d (n . u) far) it stays
+  // inset inside the area.
+  const Eigen::Vector2d n = (plan.result.X_RT_start.linear() * effector.direction_T).head<2>().normalized();
+  const Eigen::Vector2d ball_end = p_RO.head<2>() + plan.result.planned_drag_m * n.dot(dir.head<2>()) * n;
+  EXPECT_LE(ball_end.x(), options.support_area.max().x() - inset + 1e-9) << ball_end.transpose();
+
+  // 2 cm of room, under min_pull_fraction (3 cm) of the drag: nothing is planned, and the reason
+  // says why.
+  options.support_area.max().x() = p_RO.x() + inset + 0.02 * dir.x();
+  const PullPlan none = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
+  EXPECT_FALSE(none.complete());
+  EXPECT_EQ(none.result.status, PullStatus::kUnreachable);
+  EXPECT_THAT(none.result.reason, HasSubstr("off its support"));
+
+  options.support_area.max().y() = std::nan("");
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_area")));
+  options.support_area.max().y() = 1.0;
+  options.support_edge_margin_m = -0.01;
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_edge_margin_m")));
+}
+
 TEST(HandleTowardEffectorTest, TurnsTheHandleAxisTowardTheEffector) {
   Eigen::Isometry3d X_RH = Eigen::Isometry3d::Identity();
   X_RH.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
