@@ -727,6 +727,9 @@ void PullOptions::Validate() const {
   if (!std::isfinite(height_offset_m)) fail("height_offset_m", height_offset_m, "finite");
   if (!(pull_length_m > 0)) fail("pull_length_m", pull_length_m, "> 0");
   if (!(support_edge_margin_m >= 0)) fail("support_edge_margin_m", support_edge_margin_m, ">= 0");
+  if (!(support_travel_fraction > 0 && support_travel_fraction <= 1)) {
+    fail("support_travel_fraction", support_travel_fraction, "in (0, 1]");
+  }
   if (!support_area.isEmpty() && !(support_area.min().allFinite() && support_area.max().allFinite())) {
     ThrowInvalid("PullOptions: support_area = [", support_area.min().transpose(), "] .. [",
                  support_area.max().transpose(), "] (expected finite corners, or an empty box)");
@@ -1114,18 +1117,21 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   for (const double turn : turns) {
   const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
   const Eigen::Vector3d out = Eigen::AngleAxisd(-turn, up) * out_straight;
-  // The drag along u, cut where the object would come too near the edge of its support were it
-  // pushed straight along u (each orientation below cuts it again for where its working side
-  // pushes the object).
+  // The drag along u, cut where the object pushed along it would come too near the edge of its
+  // support. (Cutting it also for a push along the working side's normal, drag (n . u) along n,
+  // was tried: it cut rake_3's and spatula_1's drags to 9-10 cm, which then moved the ball 0.3
+  // and 1.3 cm; the full drags had moved it 9 and 5 cm, on the table. pull-gt 29 -> 27 of 32.)
   const double min_pull_m = options.min_pull_fraction * options.pull_length_m;
   const double pull_length =
       std::min(options.pull_length_m, DistanceToEdge(options.support_area, object_radius, options.support_edge_margin_m,
-                                                   p_RO.head<2>(), u.head<2>()));
+                                                   p_RO.head<2>(), u.head<2>()) /
+                                          options.support_travel_fraction);
   if (pull_length < min_pull_m) {
     last_failure = Cat("a drag turned ", turn * 180 / M_PI, " deg would take the object off its support after ",
                        std::max(0.0, pull_length), " m");
     continue;
   }
+  any_on_support = true;
   const double behind = object_radius + options.clearance_m + effector.half_thickness_m;
   const Eigen::Vector3d w = up.cross(u);  // horizontal, across the pull line
   // Effector centre at the start for a tool rotation R_RT; false when the tool cannot come down
@@ -1193,7 +1199,6 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     Eigen::Isometry3d X_RT;
     double elevation, yaw, roll;
     IkResult ik;
-    double pull_length;  // drag for this orientation [m] (support_area)
     double working_cos;  // working side's horizontal direction . u
   };
   std::vector<Candidate> feasible;
@@ -1211,24 +1216,9 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
             F_R = Eigen::AngleAxisd(rs * roll, r).toRotationMatrix() * F_R;
             Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
             X_RT.linear() = F_R * F_T.transpose();
-            // A ball pushed by a flat working side moves along that side's normal rather than
-            // along u (it rolls along the face): drag d moves it d (n . u) along n, the
-            // horizontal working direction, and the drag is cut for that path too. Below
-            // n . u = 0.1 only the cut along u applies (a hook meets the ball with its tip:
-            // hook_1 pulls it 7 cm into reach with n at 88 deg from u, PullFromRackTest).
+            // The working side's horizontal direction against the drag (PullResult::working_cos).
             const Eigen::Vector2d n_h = (X_RT.linear() * d_T).head<2>();
             const double along = n_h.norm() > 1e-6 ? n_h.normalized().dot(u.head<2>()) : 0.0;
-            double length = pull_length;
-            if (!options.support_area.isEmpty() && along > 0.1) {
-              length = std::min(length, DistanceToEdge(options.support_area, object_radius,
-                                                       options.support_edge_margin_m, p_RO.head<2>(), n_h.normalized()) / along);
-              if (length < min_pull_m) {
-                ++result.candidates_blocked;
-                last_failure = Cat("the working side would push the object off its support after ", length, " m");
-                continue;
-              }
-            }
-            any_on_support = true;
             Eigen::Vector3d p_RE_start;
             if (!place_start(X_RT.linear(), &p_RE_start)) {
               ++result.candidates_blocked;
@@ -1246,7 +1236,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
               ++result.candidates_blocked;
               continue;
             }
-            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik), length, along});
+            if (Converged(ik)) feasible.push_back({X_RT, el, ys * yaw, rs * roll, std::move(ik), along});
           }
         }
       }
@@ -1308,20 +1298,20 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       continue;
     }
     Eigen::Isometry3d X_RP_end = X_RP_start;
-    X_RP_end.translation() += c.pull_length * u;
+    X_RP_end.translation() += pull_length * u;
     drag.clear();
     Eigen::VectorXd q_drag = descend.back();
     const bool drag_complete = CartesianPath(solver, X_RP_start, X_RP_end, 0.0, 1.0, options.drag_waypoints,
                                              options.max_drag_joint_step_rad, 2, left_arm_clear, &q_drag, &drag);
     // How far along the pull the planned drag goes (halved steps make waypoints uneven).
-    const double drag_m = drag_complete ? c.pull_length
+    const double drag_m = drag_complete ? pull_length
                           : drag.empty()
                               ? 0.0
                               : std::clamp((chain.TipPose(drag.back()).translation() - X_RP_start.translation()).dot(u),
-                                           0.0, c.pull_length);
-    if (drag.size() < 2 || drag_m < c.pull_length * min_drag / options.drag_waypoints - 1e-6 ||
+                                           0.0, pull_length);
+    if (drag.size() < 2 || drag_m < pull_length * min_drag / options.drag_waypoints - 1e-6 ||
         drag_m < min_pull_m - 1e-6) {
-      last_failure = Cat("drag IK ended after ", drag_m, " of ", c.pull_length, " m");
+      last_failure = Cat("drag IK ended after ", drag_m, " of ", pull_length, " m");
       continue;
     }
     Eigen::Isometry3d X_RP_last = X_RP_start;
@@ -1348,9 +1338,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       best = {above.q, transfer, descend, drag, lift, drag_m};
       chosen = &c;
     }
-    // A drag cut short by the support is complete, but another orientation may push the object
-    // along a longer path on it.
-    if ((drag_complete && c.pull_length >= pull_length - 1e-9) || complete >= options.max_complete_plans) break;
+    if (drag_complete || complete >= options.max_complete_plans) break;
   }
   if (chosen != nullptr) {
     q_above = std::move(best.q_above);

@@ -298,13 +298,16 @@ struct PullOptions {
   double height_offset_m = 0.0;     // effector centre height above the object centre [m]
   double pull_length_m = 0.25;      // planned drag along the action's direction [m], > 0
   /// The object's support (the table top) as a box in the horizontal plane of R [m]; empty (the
-  /// default) = unbounded. The drag of each sampled tool orientation is cut so that the object,
-  /// pushed along the working side's horizontal normal, keeps its centre object_radius +
-  /// support_edge_margin_m [m] (>= 0) inside the box (an object that starts nearer an edge may
-  /// come 2 cm closer to it); one that leaves less than min_pull_fraction of pull_length_m is not
-  /// tried. Drags turned toward the rack pushed the ball off the table's side (random 50, seed 1).
+  /// default) = unbounded. The drag along each direction (max_pull_turn_rad) is cut so that the
+  /// object, moved support_travel_fraction (in (0, 1]) of the drag along it, keeps its centre
+  /// object_radius + support_edge_margin_m [m] (>= 0) inside the box (an object that starts nearer
+  /// an edge may come 2 cm closer to it); a direction left with less than min_pull_fraction of
+  /// pull_length_m is not tried. A drag turned toward the rack pushed the ball off the table's
+  /// side (random 50, seed 1, episode 13). The ball moves about half the drag (pull-gt: cut for
+  /// a full-length travel, spatula_1's drag shrank to 9 cm and left the ball out of reach).
   Eigen::AlignedBox2d support_area;
   double support_edge_margin_m = 0.05;
+  double support_travel_fraction = 0.5;
   /// The drag may be cut short where IK stops converging, but not below this fraction of
   /// pull_length_m, in (0, 1].
   double min_pull_fraction = 0.3;
@@ -420,8 +423,8 @@ struct PullResult {
   Eigen::Isometry3d X_RT_start = Eigen::Isometry3d::Identity();  // planned tool pose at the drag start, in R
   Eigen::Vector3d pull_dir_R = Eigen::Vector3d::Zero();    // unit horizontal drag direction used, in R
   double pull_turn_rad = 0.0;    // its turn about z_R from ActionDirection(action, p_RO) [rad]
-  /// Cosine between the working side's horizontal direction at the start and pull_dir_R (a ball
-  /// pushed by a flat side moves along its normal; PullOptions::support_area).
+  /// Cosine between the working side's horizontal direction at the start and pull_dir_R (for a
+  /// flat side, the ball it pushes tends to roll along it when this is small).
   double working_cos = 0.0;
   double planned_drag_m = 0.0;   // length of the planned drag [m]
   double planned_lift_m = 0.0;   // height of the planned lift after it [m] (approach_height_m when complete)

@@ -66,21 +66,26 @@ class ToolActionPlanTest : public ::testing::TestWithParam<ToolAction> {
 robot::RobotDescription* ToolActionPlanTest::robot_ = nullptr;
 
 // A 30 cm stick held at the hand's grasp cylinder, its axis z_T along the cylinder's axis; the
-// effector (the far end) meets the object with its +x_T side. Few orientation samples keep the
-// plan under a second; no effector points, so the start lies on the drag line.
-TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
-  const ToolAction action = GetParam();
-  const robot::RobotDescription& desc = *robot_;
+// effector (the far end) meets the object with its +x_T side.
+Eigen::Isometry3d StickInTheHand(const robot::RobotDescription& desc) {
   Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
   X_PT.linear() =
       Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
   X_PT.translation() = desc.grasp.center;
+  return X_PT;
+}
+
+ToolEffector StickEffector() {
   ToolEffector effector;
   effector.center_T = Eigen::Vector3d(0.0, 0.0, 0.30);
   effector.direction_T = Eigen::Vector3d::UnitX();
   effector.half_thickness_m = 0.01;
+  return effector;
+}
+
+// Few orientation samples keep the plan under a second; a straight 10 cm drag.
+PullOptions FewOrientations() {
   PullOptions options;
-  options.action = action;
   options.min_elevation_rad = 20.0 * M_PI / 180.0;
   options.max_elevation_rad = 40.0 * M_PI / 180.0;
   options.elevation_step_rad = 10.0 * M_PI / 180.0;
@@ -88,6 +93,17 @@ TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
   options.max_roll_rad = 60.0 * M_PI / 180.0;
   options.max_pull_turn_rad = 0.0;
   options.pull_length_m = 0.10;
+  return options;
+}
+
+// The stick (StickInTheHand); no effector points, so the start lies on the drag line.
+TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
+  const ToolAction action = GetParam();
+  const robot::RobotDescription& desc = *robot_;
+  const Eigen::Isometry3d X_PT = StickInTheHand(desc);
+  const ToolEffector effector = StickEffector();
+  PullOptions options = FewOrientations();
+  options.action = action;
   const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
   constexpr double kRadius = 0.035;
   const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
@@ -130,30 +146,17 @@ TEST_P(ToolActionPlanTest, StartsOnTheFarSideAndDragsAlongTheActionDirection) {
 // little room left the direction is not tried.
 TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   const robot::RobotDescription& desc = *robot_;
-  Eigen::Isometry3d X_PT = Eigen::Isometry3d::Identity();
-  X_PT.linear() =
-      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), desc.grasp.axis.normalized()).toRotationMatrix();
-  X_PT.translation() = desc.grasp.center;
-  ToolEffector effector;
-  effector.center_T = Eigen::Vector3d(0.0, 0.0, 0.30);
-  effector.direction_T = Eigen::Vector3d::UnitX();
-  effector.half_thickness_m = 0.01;
-  PullOptions options;
-  options.min_elevation_rad = 20.0 * M_PI / 180.0;
-  options.max_elevation_rad = 40.0 * M_PI / 180.0;
-  options.elevation_step_rad = 10.0 * M_PI / 180.0;
-  options.max_yaw_rad = 40.0 * M_PI / 180.0;
-  options.max_roll_rad = 60.0 * M_PI / 180.0;
-  options.max_pull_turn_rad = 0.0;
-  options.pull_length_m = 0.10;
+  const Eigen::Isometry3d X_PT = StickInTheHand(desc);
+  const ToolEffector effector = StickEffector();
+  PullOptions options = FewOrientations();
   const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
   constexpr double kRadius = 0.035;
   const Eigen::Vector3d dir = ActionDirection(ToolAction::kPull, p_RO);
-  // The table's near edge 6 cm beyond the ball's inset (radius + margin) along x: a drag of
-  // 0.06 / dir.x() along the pull direction is left.
+  // The table's near edge 3 cm beyond the ball's inset (radius + margin) along x: the ball may
+  // travel 0.03 / dir.x() along the pull direction, which a drag of twice that makes.
   const double inset = kRadius + options.support_edge_margin_m;
-  options.support_area = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.06, 1.0));
-  const double room = 0.06 / dir.x();
+  options.support_area = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.03, 1.0));
+  const double room = 0.03 / dir.x() / options.support_travel_fraction;
   const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
   ASSERT_TRUE(plan.complete()) << plan.result.reason;
   EXPECT_LE(plan.result.planned_drag_m, room + 1e-9);
@@ -162,15 +165,13 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   const Eigen::Vector3d p_start = (chain.TipPose(plan.drag.front()) * X_PT) * effector.center_T;
   const Eigen::Vector3d p_end = (chain.TipPose(plan.drag.back()) * X_PT) * effector.center_T;
   EXPECT_LT((p_end - p_start).dot(dir), room + 0.01);
-  // Where the working side pushes the ball (along its horizontal normal n, d (n . u) far) it stays
-  // inset inside the area.
   const Eigen::Vector2d n = (plan.result.X_RT_start.linear() * effector.direction_T).head<2>().normalized();
-  const Eigen::Vector2d ball_end = p_RO.head<2>() + plan.result.planned_drag_m * n.dot(dir.head<2>()) * n;
-  EXPECT_LE(ball_end.x(), options.support_area.max().x() - inset + 1e-9) << ball_end.transpose();
+  EXPECT_NEAR(plan.result.working_cos, n.dot(dir.head<2>()), 1e-9);
 
-  // 2 cm of room, under min_pull_fraction (3 cm) of the drag: nothing is planned, and the reason
-  // says why.
-  options.support_area.max().x() = p_RO.x() + inset + 0.02 * dir.x();
+  // The ball 5 mm from falling over the edge (nearer it than the margin, it may come 2 cm closer
+  // but not over it): 5 mm of travel, a drag under min_pull_fraction (3 cm); nothing is
+  // planned, and the reason says why.
+  options.support_area.max().x() = p_RO.x() + kRadius + 0.005;
   const PullPlan none = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
   EXPECT_FALSE(none.complete());
   EXPECT_EQ(none.result.status, PullStatus::kUnreachable);
@@ -179,6 +180,9 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   options.support_area.max().y() = std::nan("");
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_area")));
   options.support_area.max().y() = 1.0;
+  options.support_travel_fraction = 0.0;
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_travel_fraction")));
+  options.support_travel_fraction = 0.5;
   options.support_edge_margin_m = -0.01;
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_edge_margin_m")));
 }
