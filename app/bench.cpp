@@ -113,6 +113,13 @@ SweepOptions SweepOptionsFor(const BenchRequest& request, const std::string& pro
   return options;
 }
 
+SceneRequest BenchScene(const BenchRequest& request, std::uint64_t seed) {
+  SceneRequest scene;
+  scene.scene_file = request.scene_file;
+  scene.seed = seed;
+  return scene;
+}
+
 int MergeRuns(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& out_dir) {
   if (dirs.empty()) ThrowInvalid("merge: no run folders given");
   const std::vector<SweepLine> lines = ReadSweepResults(dirs);

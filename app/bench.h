@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "app/plots.h"
+#include "app/scene_setup.h"
 #include "app/sweep.h"
 #include "toollib/tool_model.h"
 
@@ -50,6 +51,9 @@ struct BenchProtocol {
   /// more) from results lines, e.g. of several shards (`toolbench merge`). Empty otherwise.
   std::function<void(const BenchRequest&, const std::vector<SweepLine>&)> report;
 };
+
+/// The scene a bench case runs in: request.scene_file, and `seed` (a case's own, or the run's).
+SceneRequest BenchScene(const BenchRequest& request, std::uint64_t seed);
 
 /// All protocols, in the order `toolbench bench --help` lists them.
 std::vector<BenchProtocol> BenchProtocols();

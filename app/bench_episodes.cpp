@@ -98,8 +98,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   }
   auto run_case = [&](const SweepCase& c) {
     EpisodeRequest episode;
-    episode.scene.seed = c.params["scene_seed"].get<std::uint64_t>();
-    episode.scene.scene_file = request.scene_file;
+    episode.scene = BenchScene(request, c.params["scene_seed"].get<std::uint64_t>());
     episode.quiet = true;
     episode.best_tool_only = request.best_tool_only;
     episode.frames = request.frames;

@@ -184,9 +184,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
 }
 
 int RunGraspBench(const BenchRequest& request) {
-  SceneRequest scene_request;
-  scene_request.seed = request.seed;
-  scene_request.scene_file = request.scene_file;
+  const SceneRequest scene_request = BenchScene(request, request.seed);
   const LoadedScene scene = LoadScene(scene_request);  // built once; the case processes inherit it
   std::vector<std::string> cells;
   for (std::string_view cell : sim::kCellNames) cells.emplace_back(cell);

@@ -194,7 +194,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   if (options.inspect_held_tool) frame("1b_inspected");  // its own GL context: after the eye's is gone
   out.ball_start_R = ball_R();
   control::PullOptions pull_options = options.pull;
-  pull_options.support_area = TableTopArea(scene.spec);
+  pull_options.support_xy = TableTopArea(scene.spec);
   // Where the tool really is at the start of the drag (ground truth), against where the plan put
   // it, and the palm from the encoders against the tool: sag of the arm vs slip in the hand.
   int stage_index = 0;
@@ -249,9 +249,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
 }
 
 int RunPullBench(const BenchRequest& request) {
-  SceneRequest scene_request;
-  scene_request.seed = request.seed;
-  scene_request.scene_file = request.scene_file;
+  const SceneRequest scene_request = BenchScene(request, request.seed);
   const LoadedScene scene = LoadScene(scene_request);  // built once; the case processes inherit it
   const PullCaseOptions options;
   const std::vector<SweepCase> cases = ToolCellCases(SortedToolNames(scene.library), {options.cell});

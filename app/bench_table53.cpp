@@ -358,9 +358,7 @@ std::vector<std::string> CellsOf(const std::vector<SweepLine>& lines) {
 }  // namespace
 
 int RunTable53Bench(const BenchRequest& request) {
-  SceneRequest library_request;
-  library_request.seed = request.seed;
-  library_request.scene_file = request.scene_file;
+  const SceneRequest library_request = BenchScene(request, request.seed);
   const LoadedScene base = LoadScene(library_request);
   std::vector<std::string> cells;
   if (request.extended) {
@@ -398,9 +396,7 @@ int RunTable53Bench(const BenchRequest& request) {
     const std::string tool = c.params["tool"];
     const std::string cell = c.params["cell"];
     sim::GlContext gl;
-    SceneRequest scene_request;
-    scene_request.seed = DeriveSeed(request.seed, "table53/" + c.id);
-    scene_request.scene_file = request.scene_file;
+    SceneRequest scene_request = BenchScene(request, DeriveSeed(request.seed, "table53/" + c.id));
     scene_request.tools = {tool};
     scene_request.cells = {cell};
     const Capture capture = CaptureFrame(scene_request, CaptureOptions{}, gl);
@@ -426,8 +422,7 @@ int RunTable53Bench(const BenchRequest& request) {
     const std::string tool = c.params["tool"];
     const std::string cell = c.params["cell"];
     EpisodeRequest episode;
-    episode.scene.seed = DeriveSeed(request.seed, "table53/" + c.id);
-    episode.scene.scene_file = request.scene_file;
+    episode.scene = BenchScene(request, DeriveSeed(request.seed, "table53/" + c.id));
     episode.scene.tools = {tool};
     episode.scene.cells = {cell};
     episode.quiet = true;
@@ -485,9 +480,7 @@ int RunTable53Bench(const BenchRequest& request) {
 }
 
 void ReportTable53(const BenchRequest& request, const std::vector<SweepLine>& lines) {
-  SceneRequest library_request;
-  library_request.seed = request.seed;
-  library_request.scene_file = request.scene_file;
+  const SceneRequest library_request = BenchScene(request, request.seed);
   const std::vector<toollib::ToolModel> library = LoadScene(library_request).library;
   std::map<std::string, std::string> family_of;
   for (const auto& m : library) family_of[m.name] = m.family;

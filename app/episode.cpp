@@ -402,7 +402,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 4. Predict each tool's effect and choose. ----
     control::PullOptions pull_options;
     pull_options.action = *action;
-    pull_options.support_area = TableTopArea(spec);
+    pull_options.support_xy = TableTopArea(spec);
     // In-hand rolls the model was explored with: the grasp (and so the roll) is not planned yet,
     // so a tool's expected effect is its mean over them.
     std::vector<double> rolls_deg{0.0, 90.0, 180.0, 270.0};
@@ -414,7 +414,6 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     std::vector<double> predicted(analysis.tools.size(), -std::numeric_limits<double>::infinity());
     std::vector<int> ranking;
     run_stage("choose_tool", [&](StageRecord& s) {
-      double best = -std::numeric_limits<double>::infinity();
       nlohmann::json per_tool = nlohmann::json::array();
       for (size_t i = 0; i < analysis.tools.size(); ++i) {
         const perception::ToolAnalysis& t = analysis.tools[i];
@@ -445,15 +444,14 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         per_tool.push_back(entry);
         predicted[i] = p;
         if (std::isfinite(p)) ranking.push_back(static_cast<int>(i));
-        if (p > best) {
-          best = p;
-          result.chosen_segment = static_cast<int>(i);
-        }
       }
       std::stable_sort(ranking.begin(), ranking.end(),
                        [&](int a, int b) { return predicted[static_cast<size_t>(a)] > predicted[static_cast<size_t>(b)]; });
+      // perceive_tools found a tool, and each analysed tool has a finite prediction.
+      TOOLBENCH_DEMAND(!ranking.empty());
+      result.chosen_segment = ranking.front();
       result.chosen_tool = analysis.tools[static_cast<size_t>(result.chosen_segment)].model;
-      result.predicted_displacement_m = best;
+      result.predicted_displacement_m = predicted[static_cast<size_t>(result.chosen_segment)];
       s.ok = true;
       s.outcome = result.chosen_tool;
       s.details = {{"action", request.action},
@@ -461,7 +459,6 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"note", result.choice_note},
                    {"tools", per_tool}};
     });
-    TOOLBENCH_DEMAND(!ranking.empty());  // perceive_tools found a tool, and each has a finite prediction
     // The tool the robot goes for (select_tool): its analysis, its recognised library model, and
     // which simulated tool it is, for scoring and the hand-over only: the one whose true handle
     // centre is nearest the perceived one (tool origins mislead: a stick fitted end over end has

@@ -280,8 +280,9 @@ TablePutDown PutDownOnTable(RobotInterface& robot, const robot::RobotDescription
   control::PutDownOptions options = base;
   options.tool_points_T = model.mesh.vertices.cast<double>();
   options.keep_out_R = ball_R;
-  const Eigen::Vector2d half = spec.table.size / 2 - Eigen::Vector2d::Constant(0.05);
-  options.support_xy = Eigen::AlignedBox2d(spec.table.center - half, spec.table.center + half);
+  const Eigen::AlignedBox2d table = TableTopArea(spec);
+  options.support_xy = Eigen::AlignedBox2d(table.min() + Eigen::Vector2d::Constant(0.05),
+                                           table.max() - Eigen::Vector2d::Constant(0.05));
   TablePutDown out;
   out.put.reason = "no free place on the table 15 cm from the ball";
   for (const bool check : {true, false}) {

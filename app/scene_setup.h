@@ -70,7 +70,8 @@ InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry
 /// obstacles for the arm's planning: known from the scene file, like the table height.
 std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec);
 
-/// The table top in the horizontal plane of R (for PullOptions::support_area): known from the
+/// The table top in the horizontal plane of R (PullOptions::support_xy, and shrunk for
+/// PutDownOptions::support_xy): known from the
 /// scene file, like the table height.
 Eigen::AlignedBox2d TableTopArea(const sim::SceneSpec& spec);
 

@@ -730,9 +730,9 @@ void PullOptions::Validate() const {
   if (!(support_travel_fraction > 0 && support_travel_fraction <= 1)) {
     fail("support_travel_fraction", support_travel_fraction, "in (0, 1]");
   }
-  if (!support_area.isEmpty() && !(support_area.min().allFinite() && support_area.max().allFinite())) {
-    ThrowInvalid("PullOptions: support_area = [", support_area.min().transpose(), "] .. [",
-                 support_area.max().transpose(), "] (expected finite corners, or an empty box)");
+  if (!support_xy.isEmpty() && !(support_xy.min().allFinite() && support_xy.max().allFinite())) {
+    ThrowInvalid("PullOptions: support_xy = [", support_xy.min().transpose(), "] .. [",
+                 support_xy.max().transpose(), "] (expected finite corners, or an empty box)");
   }
   if (!(max_drag_joint_step_rad > 0)) fail("max_drag_joint_step_rad", max_drag_joint_step_rad, "> 0");
   if (!(min_pull_fraction > 0 && min_pull_fraction <= 1)) fail("min_pull_fraction", min_pull_fraction, "in (0, 1]");
@@ -1113,7 +1113,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   double best_error = std::numeric_limits<double>::infinity();
   bool any_feasible = false;
   bool planned = false;
-  bool any_on_support = false;  // a sampled orientation kept the object on support_area
+  bool any_on_support = false;  // a sampled orientation kept the object on support_xy
   for (const double turn : turns) {
   const Eigen::Vector3d u = Eigen::AngleAxisd(-turn, up) * u_straight;
   const Eigen::Vector3d out = Eigen::AngleAxisd(-turn, up) * out_straight;
@@ -1123,7 +1123,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   // and 1.3 cm; the full drags had moved it 9 and 5 cm, on the table. pull-gt 29 -> 27 of 32.)
   const double min_pull_m = options.min_pull_fraction * options.pull_length_m;
   const double pull_length =
-      std::min(options.pull_length_m, DistanceToEdge(options.support_area, object_radius, options.support_edge_margin_m,
+      std::min(options.pull_length_m, DistanceToEdge(options.support_xy, object_radius, options.support_edge_margin_m,
                                                    p_RO.head<2>(), u.head<2>()) /
                                           options.support_travel_fraction);
   if (pull_length < min_pull_m) {

@@ -305,7 +305,7 @@ struct PullOptions {
   /// pull_length_m is not tried. A drag turned toward the rack pushed the ball off the table's
   /// side (random 50, seed 1, episode 13). The ball moves about half the drag (pull-gt: cut for
   /// a full-length travel, spatula_1's drag shrank to 9 cm and left the ball out of reach).
-  Eigen::AlignedBox2d support_area;
+  Eigen::AlignedBox2d support_xy;
   double support_edge_margin_m = 0.05;
   double support_travel_fraction = 0.5;
   /// The drag may be cut short where IK stops converging, but not below this fraction of

@@ -155,7 +155,7 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   // The table's near edge 3 cm beyond the ball's inset (radius + margin) along x: the ball may
   // travel 0.03 / dir.x() along the pull direction, which a drag of twice that makes.
   const double inset = kRadius + options.support_edge_margin_m;
-  options.support_area = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.03, 1.0));
+  options.support_xy = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.03, 1.0));
   const double room = 0.03 / dir.x() / options.support_travel_fraction;
   const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
   ASSERT_TRUE(plan.complete()) << plan.result.reason;
@@ -171,15 +171,15 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   // The ball 5 mm from falling over the edge (nearer it than the margin, it may come 2 cm closer
   // but not over it): 5 mm of travel, a drag under min_pull_fraction (3 cm); nothing is
   // planned, and the reason says why.
-  options.support_area.max().x() = p_RO.x() + kRadius + 0.005;
+  options.support_xy.max().x() = p_RO.x() + kRadius + 0.005;
   const PullPlan none = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
   EXPECT_FALSE(none.complete());
   EXPECT_EQ(none.result.status, PullStatus::kUnreachable);
   EXPECT_THAT(none.result.reason, HasSubstr("off its support"));
 
-  options.support_area.max().y() = std::nan("");
-  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_area")));
-  options.support_area.max().y() = 1.0;
+  options.support_xy.max().y() = std::nan("");
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_xy")));
+  options.support_xy.max().y() = 1.0;
   options.support_travel_fraction = 0.0;
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_travel_fraction")));
   options.support_travel_fraction = 0.5;

@@ -258,13 +258,16 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
 // one predicted best (a hook standing upside down, rot2) has its handle out of reach.
 constexpr const char* kUnreachableFirstChoiceSeed = "1267194658511675468";
 
-nlohmann::json GraspStage(const std::filesystem::path& dir) {
+nlohmann::json ReadResult(const std::filesystem::path& dir) {
   std::ifstream in(dir / "result.json");
-  const nlohmann::json result = nlohmann::json::parse(in);
+  return nlohmann::json::parse(in);
+}
+
+nlohmann::json GraspStage(const nlohmann::json& result) {
   for (const auto& s : result["stages"]) {
     if (s["name"] == "grasp_tool") return s;
   }
-  ADD_FAILURE() << "no grasp_tool stage in " << (dir / "result.json");
+  ADD_FAILURE() << "no grasp_tool stage in " << result.dump(1);
   return nlohmann::json::object();
 }
 
@@ -273,14 +276,13 @@ TEST(CliTest, AnEpisodeTakesTheNextBestToolWhenTheFirstChoiceIsOutOfReach) {
   const CliRun r = Toolbench(std::string("episode --quiet --seed ") + kUnreachableFirstChoiceSeed + " --out " +
                              dir.string());
   ASSERT_EQ(r.code, 0) << r.output;
-  const nlohmann::json grasp = GraspStage(dir);
+  const nlohmann::json result = ReadResult(dir);
+  const nlohmann::json grasp = GraspStage(result);
   const nlohmann::json& tried = grasp["details"]["tools_tried"];
   ASSERT_GE(tried.size(), 2u) << grasp.dump(1);
   // The scene exercises the fallback only while the first choice is out of reach.
   ASSERT_EQ(tried[0]["status"], "unreachable") << tried.dump(1);
   EXPECT_EQ(grasp["details"]["first_choice"], tried[0]["model"]);
-  std::ifstream in(dir / "result.json");
-  const nlohmann::json result = nlohmann::json::parse(in);
   EXPECT_EQ(result["chosen_tool"], tried.back()["model"]);
   EXPECT_NE(result["chosen_tool"], tried[0]["model"]);
   EXPECT_TRUE(result["grasp_success"].get<bool>()) << grasp.dump(1);
@@ -291,11 +293,10 @@ TEST(CliTest, AnEpisodeTakesTheNextBestToolWhenTheFirstChoiceIsOutOfReach) {
   const CliRun t = Toolbench(std::string("episode --quiet --best-tool-only --seed ") + kUnreachableFirstChoiceSeed +
                              " --out " + thesis_dir.string());
   ASSERT_EQ(t.code, 0) << t.output;
-  const nlohmann::json thesis_grasp = GraspStage(thesis_dir);
+  const nlohmann::json thesis = ReadResult(thesis_dir);
+  const nlohmann::json thesis_grasp = GraspStage(thesis);
   EXPECT_EQ(thesis_grasp["details"]["tools_tried"].size(), 1u);
   EXPECT_EQ(thesis_grasp["outcome"], "handed_over");
-  std::ifstream thesis_in(thesis_dir / "result.json");
-  const nlohmann::json thesis = nlohmann::json::parse(thesis_in);
   EXPECT_EQ(thesis["chosen_tool"], tried[0]["model"]);
   EXPECT_TRUE(thesis["assisted"].get<bool>());
 }
