@@ -243,6 +243,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     stage.name = name;
     const auto start = Clock::now();
     const double robot_start = robot.Time();
+    const sim::PhysicsStats physics_start = world.physics_stats();
     try {
       body(stage);
     } catch (const std::invalid_argument&) {
@@ -259,6 +260,13 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     }
     stage.wall_ms = Ms(start);
     stage.robot_s = robot.Time() - robot_start;
+    const sim::PhysicsStats physics = world.physics_stats() - physics_start;
+    stage.physics_ms = 1000.0 * physics.wall_s;
+    stage.steps = physics.steps;
+    if (physics.steps > 0) {
+      stage.mean_contacts = static_cast<double>(physics.contacts) / physics.steps;
+      stage.mean_constraint_rows = static_cast<double>(physics.constraint_rows) / physics.steps;
+    }
     // Scoring only (never seen by the robot): where each stage left the ball.
     result.truth["ball_after_stage_R"][name] =
         Vec3(X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation());
@@ -820,6 +828,10 @@ nlohmann::json EpisodeJson(const EpisodeResult& r) {
                            {"reason", s.reason},
                            {"wall_ms", s.wall_ms},
                            {"robot_s", s.robot_s},
+                           {"physics_ms", s.physics_ms},
+                           {"steps", s.steps},
+                           {"mean_contacts", s.mean_contacts},
+                           {"mean_constraint_rows", s.mean_constraint_rows},
                            {"details", s.details}});
   }
   j["truth"] = r.truth;
@@ -830,8 +842,8 @@ std::string EpisodeSummary(const EpisodeResult& r) {
   std::ostringstream out;
   out << fmt::format("episode seed {}: {}\n", r.seed, r.failure.empty() ? "completed" : "stopped at " + r.failure);
   for (const StageRecord& s : r.stages) {
-    out << fmt::format("  {:<20} {:<4} {:<14} {:7.0f} ms {:6.1f} s robot\n", s.name, s.ok ? "ok" : "FAIL", s.outcome,
-                       s.wall_ms, s.robot_s);
+    out << fmt::format("  {:<20} {:<4} {:<14} {:7.0f} ms ({:5.0f} ms physics) {:6.1f} s robot\n", s.name,
+                       s.ok ? "ok" : "FAIL", s.outcome, s.wall_ms, s.physics_ms, s.robot_s);
   }
   out << fmt::format("  chosen tool {} ({} choice, predicted {:.2f} m), ball moved {:.2f} m along the {}\n",
                      r.chosen_tool.empty() ? "-" : r.chosen_tool, r.choice_method, r.predicted_displacement_m,

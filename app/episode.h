@@ -44,6 +44,12 @@ struct StageRecord {
   std::string reason;    // why not ok
   double wall_ms = 0.0;  // wall time of the stage [ms]
   double robot_s = 0.0;  // robot (simulated) time the stage took [s]
+  /// Physics within the stage: wall time in mj_step [ms], steps, and the mean contacts and
+  /// constraint rows per step (what makes a step cost).
+  double physics_ms = 0.0;
+  long steps = 0;
+  double mean_contacts = 0.0;
+  double mean_constraint_rows = 0.0;
   nlohmann::json details = nlohmann::json::object();
 };
 

@@ -498,6 +498,11 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                 "\" noslip_tolerance=\"" + Num(spec.physics.noslip_tolerance) +
                 "\" integrator=\"Euler\"/>");
   w.Line(1, "<size njmax=\"2000\" nconmax=\"500\"/>");
+  if (spec.physics.sleep_window > 0) {
+    // Read by sim::World (SleepSettings); other MuJoCo programs ignore it and run plain physics.
+    w.Line(1, "<custom><numeric name=\"toolbench_sleep\" data=\"" + Num(spec.physics.sleep_window) + " " +
+                  Num(spec.physics.sleep_tolerance) + " " + Num(spec.physics.wake_margin) + "\"/></custom>");
+  }
   // Pinned extent: znear/zfar scale with it (measured.md C.2 #5), so the depth conversion must not
   // change with the tools on the rack.
   w.Line(1, "<statistic extent=\"1\" center=\"-0.3 0.2 0.6\"/>");

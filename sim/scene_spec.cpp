@@ -131,6 +131,10 @@ void SceneSpec::Validate() const {
   Require(physics.noslip_tolerance > 0, "physics.noslip_tolerance", physics.noslip_tolerance, "> 0");
   Require(physics.settle_time >= 0 && physics.settle_time <= 10, "physics.settle_time",
           physics.settle_time, "in [0, 10] s");
+  Require(physics.sleep_window >= 0 && physics.sleep_window <= 10, "physics.sleep_window", physics.sleep_window,
+          "in [0, 10] s (0 = never sleep)");
+  Require(physics.sleep_tolerance > 0, "physics.sleep_tolerance", physics.sleep_tolerance, "> 0");
+  Require(physics.wake_margin > 0, "physics.wake_margin", physics.wake_margin, "> 0");
   if (robot.empty()) ThrowInvalid("SceneSpec: field 'robot' is empty");
 }
 
@@ -194,6 +198,9 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Integer("noslip_iterations", spec.physics.noslip_iterations);
     r.Number("noslip_tolerance", spec.physics.noslip_tolerance);
     r.Number("settle_time", spec.physics.settle_time);
+    r.Number("sleep_window", spec.physics.sleep_window);
+    r.Number("sleep_tolerance", spec.physics.sleep_tolerance);
+    r.Number("wake_margin", spec.physics.wake_margin);
     r.Finish();
   }
   top.Finish();

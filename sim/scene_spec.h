@@ -63,6 +63,12 @@ struct PhysicsSpec {
   int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
   double noslip_tolerance = 1e-6;    // > 0; the noslip pass stops below this improvement (MuJoCo's default)
   double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
+  /// Sleeping of resting tools and ball (sim::SleepSettings): still for sleep_window [s] (>= 0,
+  /// 0 = never sleep, plain MuJoCo) within sleep_tolerance [m] (> 0), woken when a robot geom or
+  /// an awake body comes within wake_margin [m] (> 0).
+  double sleep_window = 0.25;
+  double sleep_tolerance = 2.5e-4;
+  double wake_margin = 0.02;
 };
 
 /// A complete scene description (scenes/*.json). Paths are relative to the assets folder.

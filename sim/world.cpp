@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <mutex>
 
 #include <mujoco/mujoco.h>
@@ -52,6 +54,167 @@ struct World::Impl {
   std::vector<int> qpos_adr;        // per actuator
   std::vector<int> dof_adr;         // per actuator
   SimStatus status;
+  PhysicsStats stats;
+
+  // ---- Sleeping (SleepSettings). ----
+  struct FreeBody {
+    int body = -1;
+    int qpos_adr = 0;
+    int dof_adr = 0;
+    std::vector<int> geoms;  // collision geoms, with their own filter bits
+    std::vector<int> contype, conaffinity;
+    bool asleep = false;
+    double window_start = 0.0;
+    std::array<double, 7> window_pose{};  // qpos at the window's start
+    std::array<double, 7> pinned{};       // qpos held while asleep
+  };
+  SleepSettings sleep;
+  std::vector<FreeBody> free_bodies;
+  std::vector<int> robot_geoms;  // collision geoms of bodies that move with joints (not free)
+
+  void SetUpSleeping() {
+    const int id = mj_name2id(m, mjOBJ_NUMERIC, "toolbench_sleep");
+    if (id >= 0 && m->numeric_size[id] == 3) {
+      const mjtNum* v = m->numeric_data + m->numeric_adr[id];
+      sleep = SleepSettings{v[0], v[1], v[2]};
+    }
+    std::vector<int> free_index(m->nbody, -1);
+    for (int b = 1; b < m->nbody; ++b) {
+      if (m->body_jntnum[b] != 1 || m->jnt_type[m->body_jntadr[b]] != mjJNT_FREE) continue;
+      FreeBody fb;
+      fb.body = b;
+      fb.qpos_adr = m->jnt_qposadr[m->body_jntadr[b]];
+      fb.dof_adr = m->jnt_dofadr[m->body_jntadr[b]];
+      free_index[b] = static_cast<int>(free_bodies.size());
+      free_bodies.push_back(fb);
+    }
+    for (int g = 0; g < m->ngeom; ++g) {
+      if (m->geom_contype[g] == 0 && m->geom_conaffinity[g] == 0) continue;
+      const int b = m->geom_bodyid[g];
+      if (free_index[b] >= 0) {
+        FreeBody& fb = free_bodies[free_index[b]];
+        fb.geoms.push_back(g);
+        fb.contype.push_back(m->geom_contype[g]);
+        fb.conaffinity.push_back(m->geom_conaffinity[g]);
+      } else if (m->body_weldid[b] != 0 && m->geom_type[g] != mjGEOM_PLANE) {
+        robot_geoms.push_back(g);
+      }
+    }
+  }
+
+  std::array<double, 7> Qpos(const FreeBody& fb) const {
+    std::array<double, 7> q;
+    std::copy(d->qpos + fb.qpos_adr, d->qpos + fb.qpos_adr + 7, q.begin());
+    return q;
+  }
+
+  // Movement between two free-joint poses [m], rotations at a 0.1 m lever.
+  static double Moved(const std::array<double, 7>& a, const std::array<double, 7>& b) {
+    const double dp = std::sqrt(std::pow(a[0] - b[0], 2) + std::pow(a[1] - b[1], 2) + std::pow(a[2] - b[2], 2));
+    double dot = 0.0;
+    for (int k = 3; k < 7; ++k) dot += a[k] * b[k];
+    return std::max(dp, 0.1 * 2.0 * std::acos(std::min(1.0, std::abs(dot))));
+  }
+
+  // Whether geoms g and h come within the wake margin (bounding spheres at their current poses).
+  bool Near(int g, int h) const {
+    const double reach = m->geom_rbound[g] + m->geom_rbound[h] + sleep.wake_margin_m;
+    const mjtNum* a = d->geom_xpos + 3 * g;
+    const mjtNum* b = d->geom_xpos + 3 * h;
+    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    return dx * dx + dy * dy + dz * dz < reach * reach;
+  }
+  bool Near(const FreeBody& fb, const std::vector<int>& others) const {
+    for (int g : fb.geoms) {
+      for (int h : others) {
+        if (Near(g, h)) return true;
+      }
+    }
+    return false;
+  }
+
+  void Wake(FreeBody& fb) {
+    if (!fb.asleep) return;
+    for (size_t i = 0; i < fb.geoms.size(); ++i) {
+      m->geom_contype[fb.geoms[i]] = fb.contype[i];
+      m->geom_conaffinity[fb.geoms[i]] = fb.conaffinity[i];
+    }
+    fb.asleep = false;
+    fb.window_start = d->time;
+    fb.window_pose = Qpos(fb);
+  }
+  void WakeAll() {
+    for (FreeBody& fb : free_bodies) {
+      Wake(fb);
+      fb.window_start = d->time;
+      fb.window_pose = Qpos(fb);
+    }
+  }
+
+  bool NearAwakeBody(const FreeBody& fb, const std::vector<char>& counts) const {
+    for (size_t j = 0; j < free_bodies.size(); ++j) {
+      if (counts[j] && &free_bodies[j] != &fb && Near(fb, free_bodies[j].geoms)) return true;
+    }
+    return false;
+  }
+
+  // Wakes the sleepers that a robot geom or an awake body came near (poses of the last forward).
+  void WakeNearMovers() {
+    if (sleep.window_s <= 0.0) return;
+    std::vector<char> awake(free_bodies.size());
+    for (size_t j = 0; j < free_bodies.size(); ++j) awake[j] = !free_bodies[j].asleep;
+    for (FreeBody& fb : free_bodies) {
+      if (fb.asleep && (Near(fb, robot_geoms) || NearAwakeBody(fb, awake))) Wake(fb);
+    }
+  }
+
+  // After each step: hold the sleepers, wake those a mover came near, put to sleep those at rest
+  // with no mover near.
+  void UpdateSleep() {
+    if (sleep.window_s <= 0.0) return;
+    for (FreeBody& fb : free_bodies) {
+      if (!fb.asleep) continue;
+      std::copy(fb.pinned.begin(), fb.pinned.end(), d->qpos + fb.qpos_adr);
+      std::fill(d->qvel + fb.dof_adr, d->qvel + fb.dof_adr + 6, 0.0);
+    }
+    WakeNearMovers();
+    // Rest: moved less than the tolerance since the window began, for the whole window.
+    std::vector<char> eligible(free_bodies.size(), 0);
+    for (size_t j = 0; j < free_bodies.size(); ++j) {
+      FreeBody& fb = free_bodies[j];
+      if (fb.asleep) continue;
+      const std::array<double, 7> q = Qpos(fb);
+      if (Moved(q, fb.window_pose) > sleep.tolerance_m) {
+        fb.window_start = d->time;
+        fb.window_pose = q;
+        continue;
+      }
+      eligible[j] = d->time - fb.window_start >= sleep.window_s && !Near(fb, robot_geoms);
+    }
+    // Bodies near an awake body that stays awake stay awake too (until nothing changes).
+    for (bool changed = true; changed;) {
+      changed = false;
+      std::vector<char> staying(free_bodies.size());
+      for (size_t j = 0; j < free_bodies.size(); ++j) staying[j] = !free_bodies[j].asleep && !eligible[j];
+      for (size_t j = 0; j < free_bodies.size(); ++j) {
+        if (eligible[j] && NearAwakeBody(free_bodies[j], staying)) {
+          eligible[j] = 0;
+          changed = true;
+        }
+      }
+    }
+    for (size_t j = 0; j < free_bodies.size(); ++j) {
+      if (!eligible[j]) continue;
+      FreeBody& fb = free_bodies[j];
+      for (int g : fb.geoms) {
+        m->geom_contype[g] = 0;
+        m->geom_conaffinity[g] = 0;
+      }
+      fb.asleep = true;
+      fb.pinned = Qpos(fb);
+      std::fill(d->qvel + fb.dof_adr, d->qvel + fb.dof_adr + 6, 0.0);
+    }
+  }
 
   ~Impl() {
     if (d) mj_deleteData(d);
@@ -91,6 +254,7 @@ World::World(const std::string& mjcf, std::string_view source) : impl_(std::make
   mj_deleteVFS(vfs.get());
   if (!impl_->m) ThrowInvalid("World: MuJoCo cannot load '", source, "': ", error);
   impl_->d = mj_makeData(impl_->m);
+  impl_->SetUpSleeping();
   const mjModel* m = impl_->m;
   for (int a = 0; a < m->nu; ++a) {
     if (m->actuator_trntype[a] != mjTRN_JOINT) {
@@ -116,16 +280,25 @@ void World::ResetToKeyframe(std::string_view key) {
   const int id = mj_name2id(impl_->m, mjOBJ_KEY, std::string(key).c_str());
   if (id < 0) ThrowInvalid("World::ResetToKeyframe: unknown keyframe '", key, "'");
   mj_resetDataKeyframe(impl_->m, impl_->d, id);
+  impl_->WakeAll();
   mj_forward(impl_->m, impl_->d);
   impl_->status = SimStatus{};
 }
 
 SimStatus World::Step(int steps) {
-  for (int i = 0; i < steps && impl_->status.ok; ++i) {
+  const auto start = std::chrono::steady_clock::now();
+  int taken = 0;
+  for (; taken < steps && impl_->status.ok; ++taken) {
     const double t_before = impl_->d->time;
     mj_step(impl_->m, impl_->d);
+    impl_->stats.contacts += impl_->d->ncon;
+    impl_->stats.constraint_rows += impl_->d->nefc;
     impl_->CheckWarnings(t_before);
+    impl_->UpdateSleep();
+    for (const auto& fb : impl_->free_bodies) impl_->stats.asleep += fb.asleep ? 1 : 0;
   }
+  impl_->stats.steps += taken;
+  impl_->stats.wall_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return impl_->status;
 }
 
@@ -170,6 +343,17 @@ bool World::SettleFreeBodies(double max_time, double speed_tol, double hold) {
 double World::time() const { return impl_->d->time; }
 double World::timestep() const { return impl_->m->opt.timestep; }
 SimStatus World::status() const { return impl_->status; }
+const PhysicsStats& World::physics_stats() const { return impl_->stats; }
+const SleepSettings& World::sleep_settings() const { return impl_->sleep; }
+
+bool World::IsAsleep(std::string_view body) const {
+  const int id = mj_name2id(impl_->m, mjOBJ_BODY, std::string(body).c_str());
+  if (id < 0) ThrowInvalid("World::IsAsleep: unknown body '", body, "'");
+  for (const auto& fb : impl_->free_bodies) {
+    if (fb.body == id) return fb.asleep;
+  }
+  ThrowInvalid("World::IsAsleep: body '", body, "' has no free joint");
+}
 const std::vector<std::string>& World::actuated_joints() const { return impl_->joints; }
 
 Eigen::VectorXd World::JointPositions() const {
@@ -212,6 +396,7 @@ void World::TeleportJoints(const Eigen::VectorXd& q) {
     impl_->d->qvel[impl_->dof_adr[i]] = 0.0;
   }
   mj_forward(impl_->m, impl_->d);
+  impl_->WakeNearMovers();
 }
 
 void World::TeleportFreeBody(std::string_view body, const Eigen::Isometry3d& X_WB) {
@@ -231,7 +416,11 @@ void World::TeleportFreeBody(std::string_view body, const Eigen::Isometry3d& X_W
   qpos[5] = q.y();
   qpos[6] = q.z();
   for (int i = 0; i < 6; ++i) impl_->d->qvel[m->jnt_dofadr[jnt] + i] = 0.0;
+  for (auto& fb : impl_->free_bodies) {
+    if (fb.body == id) impl_->Wake(fb);
+  }
   mj_forward(impl_->m, impl_->d);
+  impl_->WakeNearMovers();
 }
 
 GroundTruth World::ground_truth() const {

@@ -46,6 +46,10 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"noslip_tolerance": 0}})", "tol.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.noslip_tolerance")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"sleep_window": -1}})", "sleep.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.sleep_window")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"wake_margin": 0}})", "wake.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.wake_margin")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"cone": "round"}})", "cone.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("round")));
   EXPECT_THAT([] { ParseSceneSpec("[1, 2]", "array.json"); },

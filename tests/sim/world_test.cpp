@@ -1,5 +1,7 @@
 #include "sim/world.h"
 
+#include <algorithm>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <mujoco/mujoco.h>
@@ -27,8 +29,16 @@ class WorldTest : public ::testing::Test {
     delete robot_;
     delete library_;
   }
-  ComposedScene Compose(std::uint64_t seed, const std::vector<ToolPlacement>& tools = {}) const {
-    return ComposeScene(*spec_, *robot_, *library_, PlanScene(*spec_, names_, seed, tools));
+  ComposedScene Compose(std::uint64_t seed, const std::vector<ToolPlacement>& tools = {},
+                        const SceneSpec* spec = nullptr) const {
+    const SceneSpec& s = spec ? *spec : *spec_;
+    return ComposeScene(s, *robot_, *library_, PlanScene(s, names_, seed, tools));
+  }
+  // The default scene with plain MuJoCo physics (no sleeping): what the contact model does itself.
+  static SceneSpec Awake() {
+    SceneSpec spec = *spec_;
+    spec.physics.sleep_window = 0.0;
+    return spec;
   }
   static SceneSpec* spec_;
   static robot::RobotDescription* robot_;
@@ -66,11 +76,14 @@ TEST_F(WorldTest, UrdfKinematicsEqualsMujocoBodyPoses) {
   }
 }
 
-// Physics at rest holds still: after settling, tools drift < 1 mm in 2 s and the ball stays put.
+// Physics at rest holds still: after settling, tools drift < 1 mm in 2 s and the ball stays put,
+// by the contact model alone (sleeping off).
 TEST_F(WorldTest, ToolsAndBallStayPutAtRest) {
+  const SceneSpec awake = Awake();
   for (std::uint64_t seed : {1, 2, 3, 4, 5, 6}) {
-    const ComposedScene scene = Compose(seed);
+    const ComposedScene scene = Compose(seed, {}, &awake);
     World world(scene.mjcf, "rest");
+    ASSERT_EQ(world.sleep_settings().window_s, 0.0);
     ASSERT_TRUE(world.SettleFreeBodies(spec_->physics.settle_time)) << "seed " << seed;
     const GroundTruth before = world.ground_truth();
     ASSERT_TRUE(world.Advance(2.0).ok) << world.status().message;
@@ -83,6 +96,50 @@ TEST_F(WorldTest, ToolsAndBallStayPutAtRest) {
     }
     EXPECT_LT((after.Pose("ball").translation() - before.Pose("ball").translation()).norm(), 1e-3);
   }
+}
+
+// Resting tools and the ball fall asleep (out of the contact solve, held exactly), and a body that
+// comes near wakes them: a ball dropped onto a sleeping tool lying across the rack lands on it.
+TEST_F(WorldTest, RestingBodiesSleepAndWakeWhenSomethingComesNear) {
+  const ComposedScene scene = Compose(2, {{"hoe_1", "rot3"}});
+  World world(scene.mjcf, "sleep");
+  ASSERT_GT(world.sleep_settings().window_s, 0.0);
+  const std::string tool = scene.tools[0].body;
+  ASSERT_TRUE(world.SettleFreeBodies(spec_->physics.settle_time));
+  world.Advance(2.0 * world.sleep_settings().window_s);
+  ASSERT_TRUE(world.IsAsleep(tool));
+  ASSERT_TRUE(world.IsAsleep("ball"));
+  EXPECT_EQ(world.num_contacts(), 0);  // the robot touches nothing; the sleepers leave the solve
+  const PhysicsStats before = world.physics_stats();
+  const Eigen::Isometry3d X_WT = world.ground_truth().Pose(tool);
+  world.Advance(1.0);
+  const PhysicsStats slept = world.physics_stats() - before;
+  EXPECT_EQ(slept.asleep, 2 * slept.steps);
+  EXPECT_EQ(slept.contacts, 0);
+  EXPECT_TRUE(world.ground_truth().Pose(tool).isApprox(X_WT, 0.0));  // held exactly
+  EXPECT_THROW(world.IsAsleep("table"), std::invalid_argument);
+
+  // Drop the ball 10 cm above the tool's centre of mass: it wakes the tool and lands on it.
+  Eigen::Vector3d com;
+  {
+    const mjModel* m = world.mj_model();
+    const int id = mj_name2id(m, mjOBJ_BODY, tool.c_str());
+    com = Eigen::Map<const Eigen::Vector3d>(world.mj_data()->xipos + 3 * id);
+  }
+  Eigen::Isometry3d X_WB = Eigen::Isometry3d::Identity();
+  X_WB.translation() = com + Eigen::Vector3d(0, 0, 0.10 + spec_->ball.radius);
+  world.TeleportFreeBody("ball", X_WB);
+  EXPECT_FALSE(world.IsAsleep("ball"));
+  bool woke = false, touched = false;
+  for (int i = 0; i < 250 && !touched; ++i) {
+    world.Step();
+    woke = woke || !world.IsAsleep(tool);
+    const std::vector<std::string> bodies = world.ContactingBodies("ball");
+    touched = std::find(bodies.begin(), bodies.end(), tool) != bodies.end();
+  }
+  EXPECT_TRUE(woke);
+  EXPECT_TRUE(touched) << "the ball fell through the tool";
+  EXPECT_TRUE(world.status().ok) << world.status().message;
 }
 
 TEST_F(WorldTest, EveryCellSettlesOnTheRack) {
