@@ -19,11 +19,13 @@ app::LoadedScene FullScene() {
 }
 
 /// One mj_step of the full scene while the arm follows a slow sinusoid (contacts on the rack).
-/// Arg: physics.noslip_iterations (the scene's default 30; MuJoCo #3328 measured the creep of a
-/// held object ~110x smaller with 10 than without noslip).
+/// Args: physics.noslip_iterations (the scene's default 30; MuJoCo #3328 measured the creep of a
+/// held object ~110x smaller with 10 than without noslip), and sleeping (1: the scene's
+/// physics.sleep_window, resting tools and ball leave the contact solve; 0: plain MuJoCo).
 void BM_SimStepFullScene(benchmark::State& state) {
   app::LoadedScene scene = FullScene();
   scene.spec.physics.noslip_iterations = static_cast<int>(state.range(0));
+  if (state.range(1) == 0) scene.spec.physics.sleep_window = 0.0;
   std::vector<std::string> names;
   for (const auto& tool : scene.library) names.push_back(tool.name);
   std::vector<sim::ToolPlacement> placements;
@@ -33,6 +35,7 @@ void BM_SimStepFullScene(benchmark::State& state) {
   sim::World world(scene.composed.mjcf, "bench");
   world.SettleFreeBodies(scene.spec.physics.settle_time);
   const Eigen::VectorXd home = world.JointTargets();
+  const sim::PhysicsStats settled = world.physics_stats();
   int step = 0;
   double contacts = 0;
   for (auto _ : state) {
@@ -48,11 +51,20 @@ void BM_SimStepFullScene(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations());
   state.counters["contacts_per_step"] = benchmark::Counter(contacts / std::max(1, step));
+  const sim::PhysicsStats stats = world.physics_stats() - settled;
+  state.counters["asleep_per_step"] = benchmark::Counter(static_cast<double>(stats.asleep) / std::max(1L, stats.steps));
   // Real-time factor: simulated seconds per wall second.
   state.counters["realtime_factor"] =
       benchmark::Counter(world.timestep() * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_SimStepFullScene)->Arg(30)->Arg(10)->Arg(0)->Unit(benchmark::kMicrosecond)->MinTime(2.0);
+BENCHMARK(BM_SimStepFullScene)
+    ->ArgNames({"noslip", "sleep"})
+    ->Args({30, 1})
+    ->Args({30, 0})
+    ->Args({10, 0})
+    ->Args({0, 0})
+    ->Unit(benchmark::kMicrosecond)
+    ->MinTime(2.0);
 
 /// One helmet-camera frame: scene update, render, read back RGB and depth, convert depth to
 /// metres. Arg 0: ideal images; 1: with the sensor noise model (the full sensor frame, goal
