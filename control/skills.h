@@ -635,9 +635,10 @@ bool BallWithinReach(const robot::RobotDescription& desc, const Eigen::VectorXd&
                      double radius, double margin_m, const BallGraspOptions& options = {});
 
 /// Grasps a ball lying on the table with a whole-hand top grasp: palm above the ball (normal
-/// down), fingers wrapping around it, close, lift. The palm poses are tried in turn and the first with a
-/// complete path is taken (candidates_feasible counts the converged grasp IKs among those tried). Statuses as GraspHandle's (kGrasped means the
-/// fingers stopped on something; scoring checks the lift from ground truth). Throws
+/// down), fingers wrapping around it, close, lift. The palm poses are tried in turn and the first
+/// with a complete path is taken (candidates_feasible counts the converged grasp IKs among those
+/// tried). Statuses as GraspHandle's (kGrasped means the fingers stopped on something; scoring
+/// checks the lift from ground truth). Throws
 /// std::invalid_argument for bad options, non-finite p_RB or a non-positive radius.
 GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc, const Eigen::Vector3d& p_RB,
                       double radius, const BallGraspOptions& options = {});

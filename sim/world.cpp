@@ -71,6 +71,8 @@ struct World::Impl {
   SleepSettings sleep;
   std::vector<FreeBody> free_bodies;
   std::vector<int> robot_geoms;  // collision geoms of bodies that move with joints (not free)
+  std::vector<char> awake, eligible, staying;  // per free body, scratch of the step's update
+  int asleep_count = 0;
 
   void SetUpSleeping() {
     const int id = mj_name2id(m, mjOBJ_NUMERIC, "toolbench_sleep");
@@ -88,6 +90,9 @@ struct World::Impl {
       free_index[b] = static_cast<int>(free_bodies.size());
       free_bodies.push_back(fb);
     }
+    awake.resize(free_bodies.size());
+    eligible.resize(free_bodies.size());
+    staying.resize(free_bodies.size());
     for (int g = 0; g < m->ngeom; ++g) {
       if (m->geom_contype[g] == 0 && m->geom_conaffinity[g] == 0) continue;
       const int b = m->geom_bodyid[g];
@@ -140,6 +145,7 @@ struct World::Impl {
       m->geom_conaffinity[fb.geoms[i]] = fb.conaffinity[i];
     }
     fb.asleep = false;
+    --asleep_count;
     fb.window_start = d->time;
     fb.window_pose = Qpos(fb);
   }
@@ -161,7 +167,6 @@ struct World::Impl {
   // Wakes the sleepers that a robot geom or an awake body came near (poses of the last forward).
   void WakeNearMovers() {
     if (sleep.window_s <= 0.0) return;
-    std::vector<char> awake(free_bodies.size());
     for (size_t j = 0; j < free_bodies.size(); ++j) awake[j] = !free_bodies[j].asleep;
     for (FreeBody& fb : free_bodies) {
       if (fb.asleep && (Near(fb, robot_geoms) || NearAwakeBody(fb, awake))) Wake(fb);
@@ -179,9 +184,9 @@ struct World::Impl {
     }
     WakeNearMovers();
     // Rest: moved less than the tolerance since the window began, for the whole window.
-    std::vector<char> eligible(free_bodies.size(), 0);
     for (size_t j = 0; j < free_bodies.size(); ++j) {
       FreeBody& fb = free_bodies[j];
+      eligible[j] = 0;
       if (fb.asleep) continue;
       const std::array<double, 7> q = Qpos(fb);
       if (Moved(q, fb.window_pose) > sleep.tolerance_m) {
@@ -194,7 +199,6 @@ struct World::Impl {
     // Bodies near an awake body that stays awake stay awake too (until nothing changes).
     for (bool changed = true; changed;) {
       changed = false;
-      std::vector<char> staying(free_bodies.size());
       for (size_t j = 0; j < free_bodies.size(); ++j) staying[j] = !free_bodies[j].asleep && !eligible[j];
       for (size_t j = 0; j < free_bodies.size(); ++j) {
         if (eligible[j] && NearAwakeBody(free_bodies[j], staying)) {
@@ -211,6 +215,7 @@ struct World::Impl {
         m->geom_conaffinity[g] = 0;
       }
       fb.asleep = true;
+      ++asleep_count;
       fb.pinned = Qpos(fb);
       std::fill(d->qvel + fb.dof_adr, d->qvel + fb.dof_adr + 6, 0.0);
     }
@@ -295,7 +300,7 @@ SimStatus World::Step(int steps) {
     impl_->stats.constraint_rows += impl_->d->nefc;
     impl_->CheckWarnings(t_before);
     impl_->UpdateSleep();
-    for (const auto& fb : impl_->free_bodies) impl_->stats.asleep += fb.asleep ? 1 : 0;
+    impl_->stats.asleep += impl_->asleep_count;
   }
   impl_->stats.steps += taken;
   impl_->stats.wall_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -310,30 +315,18 @@ SimStatus World::Advance(double seconds) {
 bool World::SettleFreeBodies(double max_time, double speed_tol, double hold) {
   // Judged by displacement over a window, not instantaneous speed: contacts of small convex parts
   // vibrate at a few mm/s without the body going anywhere.
-  const mjModel* m = impl_->m;
   auto free_poses = [&] {
-    std::vector<double> pose;
-    for (int j = 0; j < m->njnt; ++j) {
-      if (m->jnt_type[j] != mjJNT_FREE) continue;
-      const mjtNum* q = impl_->d->qpos + m->jnt_qposadr[j];
-      pose.insert(pose.end(), q, q + 7);
-    }
-    return pose;
+    std::vector<std::array<double, 7>> poses;
+    for (const auto& fb : impl_->free_bodies) poses.push_back(impl_->Qpos(fb));
+    return poses;
   };
   const double t_end = impl_->d->time + max_time;
-  std::vector<double> before = free_poses();
+  std::vector<std::array<double, 7>> before = free_poses();
   while (impl_->d->time < t_end && impl_->status.ok) {
     Advance(hold);
-    const std::vector<double> after = free_poses();
+    const std::vector<std::array<double, 7>> after = free_poses();
     double moved = 0.0;
-    for (size_t i = 0; i < after.size(); i += 7) {
-      const double dp = std::sqrt(std::pow(after[i] - before[i], 2) + std::pow(after[i + 1] - before[i + 1], 2) +
-                                  std::pow(after[i + 2] - before[i + 2], 2));
-      double dot = 0.0;
-      for (int k = 3; k < 7; ++k) dot += after[i + k] * before[i + k];
-      const double angle = 2.0 * std::acos(std::min(1.0, std::abs(dot)));
-      moved = std::max({moved, dp, 0.1 * angle});  // 0.1 m lever: 1 mrad counts as 0.1 mm
-    }
+    for (size_t i = 0; i < after.size(); ++i) moved = std::max(moved, Impl::Moved(after[i], before[i]));
     if (moved < speed_tol * hold) return true;
     before = after;
   }
