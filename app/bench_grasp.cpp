@@ -62,6 +62,32 @@ void WriteGraspReport(const std::filesystem::path& out_dir, const nlohmann::json
   WriteTextFile(out_dir / "summary.md", md.str());
 }
 
+// "robot body-other body" for every right-arm or hand body ("r_" prefix) touching a non-robot body.
+std::vector<std::string> RobotContacts(sim::World& world, const sim::GroundTruth& truth) {
+  std::vector<std::string> contacts;
+  for (const auto& [name, pose] : truth.X_WB) {
+    if (name.rfind("r_", 0) != 0) continue;
+    for (const std::string& b : world.ContactingBodies(name)) {
+      if (b.rfind("r_", 0) != 0) contacts.push_back(name + "-" + b);
+    }
+  }
+  return contacts;
+}
+
+// {stage: {"offset_P_mm": [x, y, z], "angle_deg": a}} of GraspCaseResult::handle_in_hand.
+nlohmann::json HandleInHandJson(const std::vector<GraspCaseResult::HandleInHand>& stages) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& h : stages) {
+    const Eigen::Vector3d mm = 1000 * h.offset_P;
+    j[h.stage] = {{"offset_P_mm", {mm.x(), mm.y(), mm.z()}},
+                  {"angle_deg", h.angle_rad * 180.0 / M_PI},
+                  {"handle_moved_mm", 1000 * h.handle_moved_m},
+                  {"palm_off_plan_mm", 1000 * h.palm_off_plan_m},
+                  {"contacts", h.contacts}};
+  }
+  return j;
+}
+
 }  // namespace
 
 void GraspCaseOptions::Validate() const {
@@ -113,15 +139,29 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
     grasp_options.handle_slide_m =
         FreeHandleSlide(scene.robot, model->handle.length, options.slide_margin_m);
   }
-  if (!frame_png.empty()) {
-    // One picture per stage beside the final one: <stem>_<stage>.png.
-    grasp_options.on_stage = [&world, &frame_png](const char* stage) {
-      std::filesystem::path png = frame_png;
-      png.replace_filename(frame_png.stem().string() + "_" + stage + ".png");
-      WriteOverviewPng(world, png);
-    };
-  }
+  // At each stage of the skill: where the true handle axis passes the hand's grasp cylinder, and
+  // with frames, one picture per stage beside the final one (<stem>_<stage>.png).
+  const robot::GraspSpec& hand = scene.robot.grasp;
+  grasp_options.on_stage = [&](const char* stage) {
+    const sim::GroundTruth truth = world.ground_truth();
+    const Eigen::Isometry3d X_PT = truth.Pose(palm).inverse() * truth.Pose(body);
+    const Eigen::Vector3d d_P = (X_PT.linear() * model->handle.axis).normalized();
+    const Eigen::Vector3d from_axis = hand.center - X_PT * model->handle.center;
+    GraspCaseResult::HandleInHand h;
+    h.stage = stage;
+    h.offset_P = -(from_axis - from_axis.dot(d_P) * d_P);
+    h.angle_rad = std::acos(std::min(1.0, std::abs(d_P.dot(hand.axis.normalized()))));
+    h.handle_moved_m = (truth.Pose(body) * model->handle.center - X_WT_rest * model->handle.center).norm();
+    h.p_RP = X_RW * truth.Pose(palm).translation();  // compared with the plan when it is known
+    h.contacts = RobotContacts(world, truth);
+    out.handle_in_hand.push_back(h);
+    if (frame_png.empty()) return;
+    std::filesystem::path png = frame_png;
+    png.replace_filename(frame_png.stem().string() + "_" + stage + ".png");
+    WriteOverviewPng(world, png);
+  };
   out.grasp = control::GraspHandle(robot, scene.robot, X_RH, grasp_options);
+  for (auto& h : out.handle_in_hand) h.palm_off_plan_m = (h.p_RP - out.grasp.X_RP_grasp.translation()).norm();
   auto finish = [&] {
     if (!frame_png.empty()) WriteOverviewPng(world, frame_png);
     out.sim_time = world.time();
@@ -133,11 +173,8 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
     return finish();
   }
   // What the arm and hand touch apart from the tool (the rack, the table) when the skill ended.
-  for (const auto& [name, pose] : world.ground_truth().X_WB) {
-    if (name.rfind("r_", 0) != 0) continue;
-    for (const std::string& b : world.ContactingBodies(name)) {
-      if (b.rfind("r_", 0) != 0 && b != body) out.robot_contacts.push_back(name + "-" + b);
-    }
+  for (const std::string& c : RobotContacts(world, world.ground_truth())) {
+    if (c.substr(c.find('-') + 1) != body) out.robot_contacts.push_back(c);
   }
   if (out.grasp.status != control::GraspStatus::kGrasped) {
     out.reason = std::string(control::ToString(out.grasp.status)) + ": " + out.grasp.reason;
@@ -216,7 +253,11 @@ int RunGraspBench(const BenchRequest& request) {
                           {"candidates_feasible", r.grasp.candidates_feasible},
                           {"paths_blocked", r.grasp.paths_blocked},
                           {"transfer_raised", r.grasp.transfer_raised},
+                          {"candidates_touching", r.grasp.candidates_touching},
+                          {"last_touching", r.grasp.last_touching},
+                          {"hand_touches_fixture", r.grasp.hand_touches_fixture},
                           {"plan_ms", r.grasp.plan_ms},
+                          {"handle_in_hand", HandleInHandJson(r.handle_in_hand)},
                           {"sim_time_s", r.sim_time},
                           {"wall_ms", r.wall_ms}};
   };

@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "app/bench.h"
 #include "app/scene_setup.h"
 #include "control/skills.h"
@@ -42,6 +44,24 @@ struct GraspCaseResult {
   std::vector<std::string> foreign_contacts;  // non-robot bodies the tool touched during the hold
   std::vector<std::string> robot_contacts;    // "robot body-other body" touching when the skill ended
   bool settled = false;                       // the tool came to rest on the rack before the grasp
+  /// Where the true handle axis passed the hand's grasp cylinder at each stage of the skill
+  /// ("at_grasp", "closed", "lifted"): its offset from the cylinder's centre, perpendicular to the
+  /// handle axis, in the palm frame P [m] (x_P toward the thumb side, z_P out of the palm: > 0
+  /// means the handle sits farther from the palm than planned, toward the fingertips), and the
+  /// angle between the two axes [rad]. Ground truth, for diagnosing empty hands and drops.
+  /// Also how far the handle centre had moved from its rest and how far the palm was from the
+  /// planned grasp pose [m] (the two tell a tool pushed by the approach from a hand that stopped
+  /// short).
+  struct HandleInHand {
+    std::string stage;
+    Eigen::Vector3d offset_P = Eigen::Vector3d::Zero();
+    double angle_rad = 0.0;
+    double handle_moved_m = 0.0;
+    double palm_off_plan_m = 0.0;
+    Eigen::Vector3d p_RP = Eigen::Vector3d::Zero();  // the true palm position [m]
+    std::vector<std::string> contacts;  // "robot body-other body" touching then (the tool included)
+  };
+  std::vector<HandleInHand> handle_in_hand;
   double sim_time = 0.0;                      // simulated time of the whole case, settling included [s]
   double wall_ms = 0.0;                       // [ms], informational
 };

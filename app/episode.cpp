@@ -266,6 +266,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     if (physics.steps > 0) {
       stage.mean_contacts = static_cast<double>(physics.contacts) / physics.steps;
       stage.mean_constraint_rows = static_cast<double>(physics.constraint_rows) / physics.steps;
+      stage.mean_solver_iterations = static_cast<double>(physics.solver_iterations) / physics.steps;
     }
     // Scoring only (never seen by the robot): where each stage left the ball.
     result.truth["ball_after_stage_R"][name] =
@@ -599,6 +600,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"paths_blocked", g.paths_blocked},
                    {"last_blocked", g.last_blocked},
                    {"transfer_raised", g.transfer_raised},
+                   {"candidates_touching", g.candidates_touching},
+                   {"hand_touches_fixture", g.hand_touches_fixture},
                    {"regrasps", g.regrasps},
                    {"regrasp_reason", g.regrasp_reason},
                    {"plan_ms", plan_ms},
@@ -832,6 +835,7 @@ nlohmann::json EpisodeJson(const EpisodeResult& r) {
                            {"steps", s.steps},
                            {"mean_contacts", s.mean_contacts},
                            {"mean_constraint_rows", s.mean_constraint_rows},
+                           {"mean_solver_iterations", s.mean_solver_iterations},
                            {"details", s.details}});
   }
   j["truth"] = r.truth;

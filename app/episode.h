@@ -50,6 +50,7 @@ struct StageRecord {
   long steps = 0;
   double mean_contacts = 0.0;
   double mean_constraint_rows = 0.0;
+  double mean_solver_iterations = 0.0;  // constraint solver + noslip iterations per step (PhysicsStats)
   nlohmann::json details = nlohmann::json::object();
 };
 

@@ -97,6 +97,11 @@ struct GraspOptions {
   /// on the rack's ledge and the transfer times out: 6 of 50 random episodes in session 9).
   std::vector<ObstacleBox> obstacles;
   double obstacle_margin_m = 0.0;
+  /// With obstacles: grasp poses at which the open or the preshaped hand would come within
+  /// obstacle_margin_m of one (the fingertips against the rack's board stop the palm short of the
+  /// handle, and the closing fingers flick the tool off) are planned only when no other reachable
+  /// pose, at any slide along the handle, has a complete path. false = rest cost alone decides.
+  bool prefer_clear_hand = true;
   double transfer_check_step_rad = 0.05;
   std::vector<double> transfer_raise_m = {0.05, 0.15};
   double transfer_inward_m = 0.15;
@@ -164,6 +169,9 @@ struct GraspResult {
   int paths_blocked = 0;        // complete paths rejected: the transfer would hit an obstacle
   std::string last_blocked;     // the last of those: which link, which obstacle, where
   bool transfer_raised = false; // the chosen transfer goes through the raised palm pose first
+  int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
+  std::string last_touching;    // the last of those: which link, which obstacle
+  bool hand_touches_fixture = false;  // the chosen pose is one of those (no other had a path)
   int regrasps = 0;             // GraspToolForAction: grasps tried again after a slip (max_regrasps)
   std::string regrasp_reason;   // the slip that made it try again (status: reason)
   double transfer_s = 0.0;      // robot time: to the pre-grasp [s]
@@ -186,7 +194,9 @@ struct GraspResult {
 ///     from the previous posture (path_restarts, path_ipopt_iterations). The first
 ///     complete path wins; nothing moves before one is found;
 ///     With options.obstacles, a path whose transfer would bring the forearm or the open hand
-///     near one is rerouted through a raised palm pose or rejected (ArmClearance);
+///     near one is rerouted through a raised palm pose or rejected (ArmClearance), and grasp
+///     poses at which the open or preshaped hand would touch one are planned last
+///     (prefer_clear_hand);
 ///  3. opens the hand and moves (MoveJoints, joint space) to the staging pose, follows the
 ///     waypoints to the grasp, preshapes the hand, ramps it to desc.hand_closed over close_time,
 ///     checks the fingers stopped on something, lifts along the waypoints and holds hold_time.

@@ -298,6 +298,7 @@ SimStatus World::Step(int steps) {
     mj_step(impl_->m, impl_->d);
     impl_->stats.contacts += impl_->d->ncon;
     impl_->stats.constraint_rows += impl_->d->nefc;
+    impl_->stats.solver_iterations += impl_->d->solver_iter;
     impl_->CheckWarnings(t_before);
     impl_->UpdateSleep();
     impl_->stats.asleep += impl_->asleep_count;

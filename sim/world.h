@@ -38,10 +38,17 @@ struct PhysicsStats {
   long contacts = 0;          // sum over steps of the active contacts
   long constraint_rows = 0;   // sum over steps of the constraint rows (nefc)
   long asleep = 0;            // sum over steps of the free bodies asleep (see SleepSettings)
+  /// Sum over steps of the constraint solver's iterations (mjData::solver_iter: in MuJoCo 2.2.2
+  /// the noslip pass's iterations are counted in it, ~30 a step whenever anything touches).
+  long solver_iterations = 0;
   /// The difference of two readings (what happened between them).
   PhysicsStats operator-(const PhysicsStats& before) const {
-    return {steps - before.steps, wall_s - before.wall_s, contacts - before.contacts,
-            constraint_rows - before.constraint_rows, asleep - before.asleep};
+    return {steps - before.steps,
+            wall_s - before.wall_s,
+            contacts - before.contacts,
+            constraint_rows - before.constraint_rows,
+            asleep - before.asleep,
+            solver_iterations - before.solver_iterations};
   }
 };
 

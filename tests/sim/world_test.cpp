@@ -116,6 +116,7 @@ TEST_F(WorldTest, RestingBodiesSleepAndWakeWhenSomethingComesNear) {
   const PhysicsStats slept = world.physics_stats() - before;
   EXPECT_EQ(slept.asleep, 2 * slept.steps);
   EXPECT_EQ(slept.contacts, 0);
+  EXPECT_EQ(slept.solver_iterations, 0);  // nothing to solve
   EXPECT_TRUE(world.ground_truth().Pose(tool).isApprox(X_WT, 0.0));  // held exactly
   EXPECT_THROW(world.IsAsleep("table"), std::invalid_argument);
 
@@ -139,6 +140,9 @@ TEST_F(WorldTest, RestingBodiesSleepAndWakeWhenSomethingComesNear) {
   }
   EXPECT_TRUE(woke);
   EXPECT_TRUE(touched) << "the ball fell through the tool";
+  // The landing is solved (the noslip pass's iterations count too: noslip_iterations a step).
+  const PhysicsStats landed = world.physics_stats() - before;
+  EXPECT_GE(landed.solver_iterations, spec_->physics.noslip_iterations);
   EXPECT_TRUE(world.status().ok) << world.status().message;
 }
 
