@@ -62,13 +62,15 @@ void WriteGraspReport(const std::filesystem::path& out_dir, const nlohmann::json
   WriteTextFile(out_dir / "summary.md", md.str());
 }
 
-// "robot body-other body" for every right-arm or hand body ("r_" prefix) touching a non-robot body.
-std::vector<std::string> RobotContacts(sim::World& world, const sim::GroundTruth& truth) {
+// "robot body-other body" for every right-arm or hand body ("r_" prefix) touching a non-robot
+// body other than `except`.
+std::vector<std::string> RobotContacts(sim::World& world, const sim::GroundTruth& truth,
+                                       const std::string& except = "") {
   std::vector<std::string> contacts;
   for (const auto& [name, pose] : truth.X_WB) {
     if (name.rfind("r_", 0) != 0) continue;
     for (const std::string& b : world.ContactingBodies(name)) {
-      if (b.rfind("r_", 0) != 0) contacts.push_back(name + "-" + b);
+      if (b.rfind("r_", 0) != 0 && b != except) contacts.push_back(name + "-" + b);
     }
   }
   return contacts;
@@ -144,7 +146,8 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
   const robot::GraspSpec& hand = scene.robot.grasp;
   grasp_options.on_stage = [&](const char* stage) {
     const sim::GroundTruth truth = world.ground_truth();
-    const Eigen::Isometry3d X_PT = truth.Pose(palm).inverse() * truth.Pose(body);
+    const Eigen::Isometry3d X_WP = truth.Pose(palm);
+    const Eigen::Isometry3d X_PT = X_WP.inverse() * truth.Pose(body);
     const Eigen::Vector3d d_P = (X_PT.linear() * model->handle.axis).normalized();
     const Eigen::Vector3d from_axis = hand.center - X_PT * model->handle.center;
     GraspCaseResult::HandleInHand h;
@@ -152,7 +155,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
     h.offset_P = -(from_axis - from_axis.dot(d_P) * d_P);
     h.angle_rad = std::acos(std::min(1.0, std::abs(d_P.dot(hand.axis.normalized()))));
     h.handle_moved_m = (truth.Pose(body) * model->handle.center - X_WT_rest * model->handle.center).norm();
-    h.p_RP = X_RW * truth.Pose(palm).translation();  // compared with the plan when it is known
+    h.p_RP = X_RW * X_WP.translation();  // compared with the plan when it is known
     h.contacts = RobotContacts(world, truth);
     out.handle_in_hand.push_back(h);
     if (frame_png.empty()) return;
@@ -173,9 +176,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
     return finish();
   }
   // What the arm and hand touch apart from the tool (the rack, the table) when the skill ended.
-  for (const std::string& c : RobotContacts(world, world.ground_truth())) {
-    if (c.substr(c.find('-') + 1) != body) out.robot_contacts.push_back(c);
-  }
+  out.robot_contacts = RobotContacts(world, world.ground_truth(), body);
   if (out.grasp.status != control::GraspStatus::kGrasped) {
     out.reason = std::string(control::ToString(out.grasp.status)) + ": " + out.grasp.reason;
     return finish();
