@@ -9,7 +9,7 @@ namespace toolbench::perception::internal {
 using SqParams = Eigen::Matrix<double, 11, 1>;
 
 /// Cost of thesis eq. 2.6, (a1 a2 a3 / N) sum_i (F(p_i)^e1 - 1)^2, for the points (3 x N, in the
-/// fitting frame), and its exact gradient when `gradient` is not null. Exposed for the
+/// fitting frame), and its exact gradient when `gradient` is not null. Declared here for the
 /// finite-difference test; FitSuperquadric is the public entry point.
 double SuperquadricCost(const SqParams& x, const Eigen::Matrix3Xd& points, const Eigen::Matrix3d& R0,
                         SqParams* gradient);
