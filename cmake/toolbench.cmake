@@ -5,7 +5,11 @@ if(TOOLBENCH_SANITIZE)
   # and that ASan or x86 already cover: null (ASan reports the SEGV), object-size (ASan's bounds),
   # alignment, pointer-overflow and vptr. With them control/skills.cpp took 115 s to compile at
   # -O1 instead of 47 s (release: 36 s), and the sanitizer stage ran past CI's 90 minutes.
-  add_compile_options(-fsanitize=address,undefined -fno-sanitize=vptr,alignment,null,pointer-overflow,object-size
+  # -O1 with line tables (-g1), after and so over the build type's flags: -O2 -g doubled the
+  # compile time for nothing a sanitizer's stack trace needs (use RelWithDebInfo, not Debug:
+  # CGAL's debug-mode checks make the generator tests 20x slower).
+  add_compile_options(-O1 -g1
+                      -fsanitize=address,undefined -fno-sanitize=vptr,alignment,null,pointer-overflow,object-size
                       -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
   add_link_options(-fsanitize=address,undefined)
   # Under ASan, Eigen stops trusting glibc's 16-byte malloc alignment and switches to its own

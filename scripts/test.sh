@@ -23,10 +23,8 @@ ctest --test-dir build --output-on-failure -j 2 -L 'fast|slow|bench|regression'
 [ $quick -eq 1 ] && { stage "release tests passed (--quick: no sanitizer or fuzz stage)"; exit 0; }
 
 stage "sanitizer build (ASan + UBSan) of the unit tests"
-# -O1 with line tables (-g1), not Debug: CGAL's debug-mode checks make the generator tests 20x
-# slower, and -O2 -g doubled the compile time of this stage for nothing a stack trace needs.
-cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-  -DTOOLBENCH_SANITIZE=ON \
+# Compiler flags of a sanitizer build: cmake/toolbench.cmake.
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTOOLBENCH_SANITIZE=ON \
   -DTOOLBENCH_BUILD_BENCHMARKS=OFF -DTOOLBENCH_WERROR=ON >/dev/null
 unit_targets=$(sed -n 's/^toolbench_add_test(\([a-z_]*_tests\) LABEL fast.*/\1/p' tests/*/CMakeLists.txt)
 # shellcheck disable=SC2086
