@@ -298,6 +298,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   const Eigen::VectorXd q_now = ModelQFrom(desc, names, robot.ReadEncoders());
   const ArmClearance clearance(desc, options.obstacles, desc.hand_open, options.obstacle_margin_m);
   const ArmClearance preshaped(desc, options.obstacles, desc.hand_preshape, options.obstacle_margin_m);
+  const ArmClearance neighbours_open(desc, options.neighbours, desc.hand_open, options.obstacle_margin_m);
+  const ArmClearance neighbours_preshaped(desc, options.neighbours, desc.hand_preshape, options.obstacle_margin_m);
 
   // The grasp frame G in P: origin on the grasp cylinder's axis, z along it, x toward the palm
   // normal's component orthogonal to it (any fixed choice works: the roll is sampled).
@@ -472,6 +474,35 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // fingers then flick the tool off: 9 of the 10 empty hands and drops at pos1 in grasp-gt):
   // planned only when no other pose has a complete path, lowest rest cost first.
   std::vector<Candidate> touching;
+  // Complete paths on which the hand would touch a neighbouring tool (options.neighbours): at the
+  // staging pose, on the straight approach, at the grasp with the open or preshaped hand (an
+  // approach through a tool hung in front of the chosen one pushes the hand onto that tool's
+  // handle, and the hand closes on it). With whether the hand touches a fixture at the grasp
+  // too; taken after all others, if at all.
+  std::vector<std::pair<Plan, bool>> touching_neighbour;
+  auto neighbour_hit = [&](const Plan& p) -> std::optional<ClearanceHit> {
+    if (neighbours_open.empty()) return std::nullopt;
+    if (auto hit = neighbours_open.Check(p.q_pregrasp)) return hit;
+    Eigen::VectorXd from = p.q_pregrasp;
+    for (const Eigen::VectorXd& q : p.approach) {
+      if (auto hit = neighbours_open.CheckLine(from, q, options.transfer_check_step_rad)) return hit;
+      from = q;
+    }
+    return HandHitAtGrasp(neighbours_open, neighbours_preshaped, p.q_grasp);
+  };
+  // Plans candidate c; true when its path is complete and keeps clear of the neighbours (a
+  // complete path that does not is kept in touching_neighbour).
+  auto plan_clear_of_neighbours = [&](const Candidate& c, bool fixture_too) {
+    if (!plan_path(c, &plan)) return false;
+    if (auto hit = neighbour_hit(plan)) {
+      ++result.candidates_touching_neighbour;
+      result.last_neighbour_touch = Cat(hit->link, " within ", options.obstacle_margin_m, " m of ", hit->obstacle);
+      touching_neighbour.emplace_back(std::move(plan), fixture_too);
+      plan = Plan{};
+      return false;
+    }
+    return true;
+  };
   for (int pass = 0; pass < 2 && !planned; ++pass) {
     if (pass == 1 && (result.candidates_feasible > 0 || options.fallback_restarts == 0)) break;
     CartesianSolver screen(chain, desc.HomeQ(), pass == 0 ? screen_options : fallback_options);
@@ -512,7 +543,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
             continue;
           }
         }
-        if (plan_path(c, &plan)) {
+        if (plan_clear_of_neighbours(c, false)) {
           planned = true;
           break;
         }
@@ -523,8 +554,19 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // the order above (slide nearest the centre, then rest cost).
   for (const Candidate& c : touching) {
     if (planned) break;
-    planned = plan_path(c, &plan);
+    planned = plan_clear_of_neighbours(c, true);
     result.hand_touches_fixture = planned;
+  }
+  // Then, when allowed, a path on which the hand would touch a neighbouring tool: the first of
+  // those clear of the fixtures at the grasp, else the first.
+  if (!planned && options.neighbour_contact_allowed && !touching_neighbour.empty()) {
+    const auto it = std::find_if(touching_neighbour.begin(), touching_neighbour.end(),
+                                 [](const std::pair<Plan, bool>& p) { return !p.second; });
+    const auto& [chosen, fixture_too] = it != touching_neighbour.end() ? *it : touching_neighbour.front();
+    plan = chosen;
+    planned = true;
+    result.hand_touches_neighbour = true;
+    result.hand_touches_fixture = fixture_too;
   }
   result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
   if (result.candidates_feasible == 0) {
@@ -537,7 +579,10 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   if (!planned) {
     result.status = GraspStatus::kIkFailed;
     result.reason =
-        Cat(result.candidates_feasible, " grasp poses reachable but no complete path; last: ", last_failure);
+        touching_neighbour.empty()
+            ? Cat(result.candidates_feasible, " grasp poses reachable but no complete path; last: ", last_failure)
+            : Cat(result.candidates_feasible, " grasp poses reachable; on each of the ", touching_neighbour.size(),
+                  " complete paths the hand would touch a neighbouring tool (last: ", result.last_neighbour_touch, ")");
     return result;
   }
   result.X_RP_grasp = plan.X_RP;
@@ -843,6 +888,8 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   double plan_ms = 0.0;
   int paths_blocked = 0;
   std::string last_blocked;
+  int touching_neighbour = 0;
+  std::string last_neighbour_touch;
   auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
     GraspOptions o = options;
     o.axis_direction = direction;
@@ -852,10 +899,14 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
     plan_ms += last.plan_ms;
     paths_blocked += last.paths_blocked;
     if (!last.last_blocked.empty()) last_blocked = last.last_blocked;
+    touching_neighbour += last.candidates_touching_neighbour;
+    if (!last.last_neighbour_touch.empty()) last_neighbour_touch = last.last_neighbour_touch;
     last.candidates = candidates;
     last.plan_ms = plan_ms;
     last.paths_blocked = paths_blocked;
     last.last_blocked = last_blocked;
+    last.candidates_touching_neighbour = touching_neighbour;
+    last.last_neighbour_touch = last_neighbour_touch;
     last.slide_m = (X_RH_grasped.translation() - X_RH.translation()).dot(z_H) +
                    last.slide_m * X_RH_grasped.linear().col(2).dot(z_H);
     return last.status != GraspStatus::kUnreachable && last.status != GraspStatus::kIkFailed;

@@ -102,6 +102,17 @@ struct GraspOptions {
   /// handle, and the closing fingers flick the tool off) are planned only when no other reachable
   /// pose, at any slide along the handle, has a complete path. false = rest cost alone decides.
   bool prefer_clear_hand = true;
+  /// Things the hand should leave alone but may touch when nothing else is left: the other tools
+  /// on the rack, as boxes around their perceived parts. A complete path on which the forearm or
+  /// the open hand would come within obstacle_margin_m of one (at the staging pose, on the
+  /// straight approach, or at the grasp, open or preshaped) is taken only when no grasp pose has
+  /// another (an approach through a tool hung in front of the chosen one pushed the hand onto
+  /// that tool's handle, the hand closed on it and knocked the chosen one off the rack: 2 of 50
+  /// random episodes in session 16). The joint-space transfer is not checked against them.
+  std::vector<ObstacleBox> neighbours;
+  /// false: such paths are never taken, and a grasp that has only those reports kIkFailed naming
+  /// the neighbour, so that a caller with other tools to choose from can try them first.
+  bool neighbour_contact_allowed = true;
   double transfer_check_step_rad = 0.05;
   std::vector<double> transfer_raise_m = {0.05, 0.15};
   double transfer_inward_m = 0.15;
@@ -172,6 +183,9 @@ struct GraspResult {
   int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
   std::string last_touching;    // the last of those: which link, which obstacle
   bool hand_touches_fixture = false;  // the chosen pose is one of those (no other had a path)
+  int candidates_touching_neighbour = 0;  // complete paths on which the hand would touch a neighbour
+  std::string last_neighbour_touch;       // the last of those: which link, which neighbour
+  bool hand_touches_neighbour = false;    // the chosen path is one of those (no other was complete)
   int regrasps = 0;             // GraspToolForAction: grasps tried again after a slip (max_regrasps)
   std::string regrasp_reason;   // the slip that made it try again (status: reason)
   double transfer_s = 0.0;      // robot time: to the pre-grasp [s]
@@ -196,7 +210,8 @@ struct GraspResult {
 ///     With options.obstacles, a path whose transfer would bring the forearm or the open hand
 ///     near one is rerouted through a raised palm pose or rejected (ArmClearance), and grasp
 ///     poses at which the open or preshaped hand would touch one are planned last
-///     (prefer_clear_hand);
+///     (prefer_clear_hand); paths on which the hand would touch options.neighbours come after
+///     all of those, or never (neighbour_contact_allowed);
 ///  3. opens the hand and moves (MoveJoints, joint space) to the staging pose, follows the
 ///     waypoints to the grasp, preshapes the hand, ramps it to desc.hand_closed over close_time,
 ///     checks the fingers stopped on something, lifts along the waypoints and holds hold_time.

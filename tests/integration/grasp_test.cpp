@@ -147,6 +147,38 @@ TEST(GraspHandle, PrefersAGraspPoseWhoseHandStaysClearOfTheRack) {
   ExpectGraspedLiftedAndHeld(r);
 }
 
+// Grasp paths on which the hand would touch a neighbouring tool (GraspOptions::neighbours) come
+// after every other path, and are never taken when neighbour contact is not allowed: the grasp
+// then fails before anything moves, naming the neighbour. Here one box covers the whole
+// workspace, so every path touches it.
+TEST(GraspHandle, PlansGraspsTouchingANeighbourLastOrNotAtAll) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  request.cells = {"pos2"};
+  const LoadedScene scene = LoadScene(request);
+  GraspCaseOptions everywhere;
+  everywhere.grasp.neighbours = {{"neighbour", Eigen::Isometry3d::Identity(), Eigen::Vector3d(2.0, 2.0, 2.0)}};
+  GraspCaseOptions strict = everywhere;
+  strict.grasp.neighbour_contact_allowed = false;
+
+  const GraspCaseResult refused = RunGraspCase(scene, "stick_2", "pos2", request.seed, strict);
+  EXPECT_EQ(refused.grasp.status, control::GraspStatus::kIkFailed);
+  EXPECT_THAT(refused.grasp.reason, ::testing::HasSubstr("would touch a neighbouring tool"));
+  EXPECT_THAT(refused.grasp.last_neighbour_touch, ::testing::HasSubstr(" m of neighbour"));
+  EXPECT_GT(refused.grasp.candidates_touching_neighbour, 0);
+  EXPECT_FALSE(refused.grasp.hand_touches_neighbour);
+  EXPECT_THAT(refused.handle_in_hand, ::testing::IsEmpty()) << "the robot moved";
+
+  const GraspCaseResult alone = RunGraspCase(scene, "stick_2", "pos2", request.seed);
+  const GraspCaseResult touching = RunGraspCase(scene, "stick_2", "pos2", request.seed, everywhere);
+  EXPECT_EQ(alone.grasp.candidates_touching_neighbour, 0);
+  EXPECT_FALSE(alone.grasp.hand_touches_neighbour);
+  EXPECT_TRUE(touching.grasp.hand_touches_neighbour);
+  EXPECT_EQ(touching.grasp.candidates_touching_neighbour, refused.grasp.candidates_touching_neighbour);
+  // The same pose as without the neighbour: among the touching paths the order is unchanged.
+  EXPECT_TRUE(touching.grasp.X_RP_grasp.isApprox(alone.grasp.X_RP_grasp, 1e-9));
+  ExpectGraspedLiftedAndHeld(touching);
+}
 
 TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
   SceneRequest request;
