@@ -159,6 +159,22 @@ cv::Mat DrawAnalysis(const RgbdFrame& frame, const perception::FrameAnalysis& an
   return bgr;
 }
 
+// The tools beside tools[except], the one being grasped, as the grasp's neighbours: a box around each of
+// their parts' superquadrics (in R). Tools perceived without parts add nothing.
+std::vector<control::ObstacleBox> NeighbourBoxes(const std::vector<perception::ToolAnalysis>& tools, size_t except) {
+  std::vector<control::ObstacleBox> out;
+  for (size_t k = 0; k < tools.size(); ++k) {
+    if (k == except) continue;
+    const perception::ToolAnalysis& t = tools[k];
+    for (size_t i = 0; i < t.parts.size(); ++i) {
+      const perception::Superquadric& sq = t.parts[i].sq;
+      if (!(sq.size.minCoeff() > 0) || !sq.size.allFinite() || !sq.pose.matrix().allFinite()) continue;
+      out.push_back({Cat(t.model.empty() ? "tool" : t.model, " (segment ", t.segment, ") part ", i), sq.pose, sq.size});
+    }
+  }
+  return out;
+}
+
 cv::Mat DrawBall(const RgbdFrame& frame, const perception::BallDetection& ball) {
   cv::Mat bgr;
   cv::cvtColor(frame.rgb, bgr, cv::COLOR_RGB2BGR);
@@ -545,26 +561,47 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // request.best_tool_only): from its ground-truth handle nearly every library tool pulls the
       // ball into reach (pull-gt, seed 1: 29 of 32), and the prediction ranks them weakly, so a
       // tool the robot can take itself is worth more than the best one it cannot.
+      // A tool whose every complete grasp would put the hand against a neighbouring tool (it
+      // closes on that one and knocks the chosen tool off the rack) waits until the tools after
+      // it in the ranking have been tried; then, when none of them could be grasped, it is
+      // grasped touching.
       const int first_choice = result.chosen_segment;
+      const bool others_to_try = ranking.size() > 1 && !request.best_tool_only;
       nlohmann::json tried = nlohmann::json::array();
       double plan_ms = 0.0;
       int candidates = 0;
       control::GraspResult g;
       control::GraspResult first;
       double z0 = 0.0;
-      for (size_t k = 0; k < ranking.size(); ++k) {
-        if (k > 0 && request.best_tool_only) break;
-        select_tool(ranking[k]);
+      auto failed = [](const control::GraspResult& r) {
+        return r.status == control::GraspStatus::kUnreachable || r.status == control::GraspStatus::kIkFailed;
+      };
+      auto try_tool = [&](int segment, bool neighbour_contact_allowed) {
+        select_tool(segment);
+        grasp_options.neighbours = NeighbourBoxes(analysis.tools, static_cast<size_t>(segment));
+        grasp_options.neighbour_contact_allowed = neighbour_contact_allowed;
         z0 = world.ground_truth().Pose(tool_body).translation().z();
         g = grasp();
         plan_ms += g.plan_ms;
         candidates += g.candidates;
-        tried.push_back({{"segment", ranking[k]}, {"model", tool->model}, {"status", control::ToString(g.status)},
-                         {"reason", g.reason}});
+        tried.push_back({{"segment", segment},
+                         {"model", tool->model},
+                         {"status", control::ToString(g.status)},
+                         {"reason", g.reason},
+                         {"neighbour_contact_allowed", neighbour_contact_allowed}});
+      };
+      int neighbour_blocked = -1;  // the first tool that only a touching grasp would take
+      for (size_t k = 0; k < ranking.size(); ++k) {
+        if (k > 0 && request.best_tool_only) break;
+        try_tool(ranking[k], !others_to_try);
         if (k == 0) first = g;
-        if (g.status != control::GraspStatus::kUnreachable && g.status != control::GraspStatus::kIkFailed) break;
+        if (!failed(g)) break;
+        if (neighbour_blocked < 0 && !grasp_options.neighbour_contact_allowed && g.candidates_touching_neighbour > 0) {
+          neighbour_blocked = ranking[k];
+        }
       }
-      if (g.status == control::GraspStatus::kUnreachable || g.status == control::GraspStatus::kIkFailed) {
+      if (failed(g) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
+      if (failed(g)) {
         // No tool within reach: the hand-over brings the first choice.
         select_tool(first_choice);
         z0 = world.ground_truth().Pose(tool_body).translation().z();
@@ -602,6 +639,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"transfer_raised", g.transfer_raised},
                    {"candidates_touching", g.candidates_touching},
                    {"hand_touches_fixture", g.hand_touches_fixture},
+                   {"candidates_touching_neighbour", g.candidates_touching_neighbour},
+                   {"last_neighbour_touch", g.last_neighbour_touch},
+                   {"hand_touches_neighbour", g.hand_touches_neighbour},
                    {"regrasps", g.regrasps},
                    {"regrasp_reason", g.regrasp_reason},
                    {"plan_ms", plan_ms},
