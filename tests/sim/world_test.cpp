@@ -98,6 +98,46 @@ TEST_F(WorldTest, ToolsAndBallStayPutAtRest) {
   }
 }
 
+// A round stick laid on the table and pushed across it stops within a few centimetres: the table top
+// resists rolling (with no rolling friction there a stick put down beside the ball rolled on across
+// the table and swept the ball off its far edge).
+TEST_F(WorldTest, AStickPushedAcrossTheTableStopsRolling) {
+  const SceneSpec awake = Awake();
+  const ComposedScene scene = Compose(1, {{"stick_2", "pos2"}}, &awake);
+  World world(scene.mjcf, "roll");
+  const toollib::ToolModel* stick = nullptr;
+  for (const auto& t : *library_) {
+    if (t.name == "stick_2") stick = &t;
+  }
+  ASSERT_NE(stick, nullptr);
+  const double length = stick->mesh.vertices.row(2).maxCoeff() - stick->mesh.vertices.row(2).minCoeff();
+  const double radius = -stick->mesh.vertices.row(0).minCoeff();
+  ASSERT_GT(radius, 0.005);
+  // Lying across the table's centre, its axis (z_T) along y_R, 1 mm above the top.
+  Eigen::Isometry3d X_RT = Eigen::Isometry3d::Identity();
+  X_RT.linear() = Eigen::AngleAxisd(-M_PI / 2, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const Eigen::Vector3d center(spec_->table.center.x(), spec_->table.center.y(), spec_->table.top_z + radius + 0.001);
+  X_RT.translation() = center - X_RT.linear() * Eigen::Vector3d(0, 0, length / 2);
+  const std::string& body = scene.tools.front().body;
+  world.TeleportFreeBody(body, scene.X_WR * X_RT);
+  ASSERT_TRUE(world.Advance(0.3).ok);
+  const Eigen::Vector3d start = world.ground_truth().Pose(body).translation();
+  // A push of 0.4 m/s across its axis (toward the table's far edge, 25 cm away): it slides,
+  // starts rolling, and without rolling resistance rolls on at ~0.27 m/s, off the table.
+  const mjModel* m = world.mj_model();
+  const int id = mj_name2id(m, mjOBJ_BODY, body.c_str());
+  ASSERT_GE(id, 0);
+  const Eigen::Vector3d push_W = scene.X_WR.linear() * Eigen::Vector3d(-0.4, 0.0, 0.0);
+  const int dof = m->jnt_dofadr[m->body_jntadr[id]];
+  for (int i = 0; i < 3; ++i) world.mj_data()->qvel[dof + i] = push_W[i];
+  ASSERT_TRUE(world.Advance(1.5).ok) << world.status().message;
+  const Eigen::Vector3d end = world.ground_truth().Pose(body).translation();
+  EXPECT_LT((end - start).norm(), 0.1) << "the stick rolled on";
+  EXPECT_NEAR(end.z(), start.z(), 0.005) << "the stick left the table";
+  const double speed = Eigen::Map<const Eigen::Vector3d>(world.mj_data()->qvel + dof).norm();
+  EXPECT_LT(speed, 0.01) << "still moving";
+}
+
 // Resting tools and the ball fall asleep (out of the contact solve, held exactly), and a body that
 // comes near wakes them: a ball dropped onto a sleeping tool lying across the rack lands on it.
 TEST_F(WorldTest, RestingBodiesSleepAndWakeWhenSomethingComesNear) {
