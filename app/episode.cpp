@@ -814,6 +814,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details = {{"places_tried", put.places_tried},
                    {"place_R", d.placed ? Vec3(d.X_RP.translation()) : nlohmann::json()},
                    {"clear_of_ball_and_on_table", put.clear_of_ball},
+                   {"tool_axis_level", put.tool_axis_level},
                    {"yaws_off_table", d.yaws_off_surface},
                    {"yaws_near_ball", d.yaws_kept_out},
                    {"paths_near_ball", d.paths_kept_out},

@@ -285,10 +285,18 @@ TablePutDown PutDownOnTable(RobotInterface& robot, const robot::RobotDescription
                                            table.max() - Eigen::Vector2d::Constant(0.05));
   TablePutDown out;
   out.put.reason = "no free place on the table 15 cm from the ball";
-  for (const bool check : {true, false}) {
+  // The tool's main axis laid level first, then (when no place plans so: a handle held steeply
+  // across the grasp axis may need a palm orientation out of reach) the hand's grasp axis.
+  struct Pass {
+    bool clear_of_ball;
+    bool level_tool_axis;
+  };
+  for (const Pass pass : {Pass{true, true}, Pass{true, false}, Pass{false, false}}) {
     if (out.put.placed) break;
-    out.clear_of_ball = check;
-    if (!check) options.tool_points_T.resize(3, 0);
+    out.clear_of_ball = pass.clear_of_ball;
+    if (!pass.clear_of_ball) options.tool_points_T.resize(3, 0);
+    options.tool_axis_T = pass.level_tool_axis ? Eigen::Vector3d(model.handle.axis) : Eigen::Vector3d::Zero();
+    out.tool_axis_level = pass.level_tool_axis;
     for (const Eigen::Vector3d& place : places) {
       ++out.places_tried;
       out.put = control::PutDown(robot, desc, X_PT, place, model.handle.radius, options);

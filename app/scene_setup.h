@@ -145,7 +145,8 @@ Eigen::Isometry3d HandleFrame(const toollib::Segment& handle);
 struct TablePutDown {
   control::PutDownResult put;  // the last place tried (placed or not)
   int places_tried = 0;
-  bool clear_of_ball = true;   // placed on the first pass: the tool clear of the ball and on the table
+  bool clear_of_ball = true;   // placed on a pass that kept the tool clear of the ball and on the table
+  bool tool_axis_level = true; // placed with the tool's handle axis level (else the hand's grasp axis)
   bool hand_cleared = false;   // the palm ended within 3 cm of 15 cm above the table, or higher
   std::string clear_reason;    // why the clearing path stopped short ("" = it went all the way)
 };
@@ -155,8 +156,9 @@ struct TablePutDown {
 /// near and middle rows, the right hand's side first) at least 20 cm from ball_R[0], then a 5 x 5
 /// grid 8 cm in from the edges at least 15 cm from it; each with control::PutDown, keeping every
 /// point of the model's mesh 8 cm from every ball_R (base.keep_out_radius_m) and the tool's
-/// centroid 5 cm inside the table. When no place passes, the places again without those checks
-/// (a hand still holding the tool cannot grasp the ball). Then the open hand rises to 15 cm above
+/// centroid 5 cm inside the table, the model's handle axis laid level (control::PutDownOptions::
+/// tool_axis_T). When no place passes, the places again with the hand's grasp axis level, and then
+/// without the checks (a hand still holding the tool cannot grasp the ball). Then the open hand rises to 15 cm above
 /// the table and crosses, as far as IK goes, to above where the observation posture puts it: the
 /// joint-space move into that posture had swept the hand across the table top. ball_R: where the
 /// ball is or should be, in R, at least one. Throws as control::PutDown does, and

@@ -1545,6 +1545,9 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
 namespace toolbench::control {
 
 void PutDownOptions::Validate() const {
+  if (!tool_axis_T.allFinite()) {
+    ThrowInvalid("PutDownOptions: tool_axis_T = (", tool_axis_T.transpose(), ") is not finite");
+  }
   if (!(release_height_m >= 0)) ThrowInvalid("PutDownOptions: release_height_m = ", release_height_m, " (expected >= 0)");
   if (!(retreat_up_m >= 0)) ThrowInvalid("PutDownOptions: retreat_up_m = ", retreat_up_m, " (expected >= 0)");
   if (!(clear_height_m >= 0)) ThrowInvalid("PutDownOptions: clear_height_m = ", clear_height_m, " (expected >= 0)");
@@ -1573,10 +1576,13 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
   const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());
   const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
-  // The grasped handle runs along the grasp axis in P; keep it horizontal: rotate the current palm
-  // orientation so that the grasp axis has no vertical component, then sample yaws about z_R.
+  // Keep the tool's axis (options.tool_axis_T, else the grasp axis in P, along which a well-seated
+  // handle runs) horizontal: rotate the current palm orientation so that it has no vertical
+  // component, then sample yaws about z_R.
   const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
-  const Eigen::Vector3d axis_R = X_RP_now.linear() * desc.grasp.axis.normalized();
+  const Eigen::Vector3d axis_R = options.tool_axis_T.isZero()
+                                     ? Eigen::Vector3d(X_RP_now.linear() * desc.grasp.axis.normalized())
+                                     : Eigen::Vector3d(X_RP_now.linear() * X_PT.linear() * options.tool_axis_T.normalized());
   Eigen::Vector3d axis_flat(axis_R.x(), axis_R.y(), 0.0);
   if (axis_flat.norm() < 1e-6) axis_flat = Eigen::Vector3d::UnitX();
   const Eigen::Matrix3d R_level =

@@ -575,6 +575,11 @@ struct PutDownOptions {
   /// descent), no tool point lower than keep_out_radius_m above a centre may come within
   /// keep_out_radius_m of it horizontally (every 8th point is checked).
   Eigen::Matrix3Xd tool_points_T;
+  /// The tool's main axis in T (e.g. its handle axis; finite): when not zero it, not the hand's
+  /// grasp axis, is laid level. A handle held across the grasp axis at 16-18 deg left long tools
+  /// tilted over the table, one end down, and they tumbled when the hand opened (shovel_3 into the
+  /// ball in episode 10 of random-50, seed 1).
+  Eigen::Vector3d tool_axis_T = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3d> keep_out_R;
   double keep_out_radius_m = 0.08;
   Eigen::AlignedBox2d support_xy;

@@ -332,5 +332,30 @@ TEST(PutDownTest, RejectsAWayThereThatSweepsTheToolThroughTheBall) {
   EXPECT_TRUE(control::PutDown(robot, scene.robot, X_PT, place, 0.01, options).placed);
 }
 
+// A handle held across the hand's grasp axis (tools turn in the grip): with the tool's axis given,
+// that axis, not the grasp axis, is laid level, and the tool's lowest point ends release_height_m
+// above the table; a non-finite axis is named.
+TEST(PutDownTest, LaysTheToolsOwnAxisLevelWhenItIsHeldAskew) {
+  SettledScene settled("put-down level axis");
+  const LoadedScene& scene = settled.scene;
+  sim::SimRobot& robot = settled.robot;
+  const Eigen::Isometry3d X_PT = PalmGraspFrame(scene.robot) * Eigen::AngleAxisd(20.0 * M_PI / 180, Eigen::Vector3d::UnitX());
+  const Eigen::Vector3d axis_P = X_PT.linear().col(2);
+  ASSERT_NEAR(std::acos(axis_P.dot(scene.robot.grasp.axis.normalized())) * 180 / M_PI, 20.0, 0.5);
+  control::PutDownOptions options;
+  options.tool_points_T = RodPoints();
+  options.tool_axis_T = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d place(-0.3, 0.05, scene.spec.table.top_z);
+  const control::PutDownResult r = control::PutDown(robot, scene.robot, X_PT, place, 0.01, options);
+  ASSERT_TRUE(r.placed) << r.reason;
+  const Eigen::Isometry3d X_RT = r.X_RP * X_PT;
+  EXPECT_LT(std::abs(X_RT.linear().col(2).z()), std::sin(0.5 * M_PI / 180)) << "the rod is not level";
+  const Eigen::Matrix3Xd points = X_RT * options.tool_points_T;
+  EXPECT_NEAR(points.row(2).minCoeff(), place.z() + options.release_height_m, 1e-3);
+  options.tool_axis_T.y() = std::nan("");
+  EXPECT_THAT([&] { control::PutDown(robot, scene.robot, X_PT, place, 0.01, options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("tool_axis_T")));
+}
+
 }  // namespace
 }  // namespace toolbench::app
