@@ -34,7 +34,8 @@ struct GazeResult {
 /// Points the camera frame's optical axis (+z) at `p_R_target` (robot root frame [m]), with the
 /// image horizon kept level as far as the neck roll allows, by moving
 /// the joints in options.joint_weights from `q_current`, within their limits. Damped
-/// Gauss-Newton on forward kinematics of the URDF. Throws std::invalid_argument for a
+/// Gauss-Newton on forward kinematics of the URDF; when that stops short of the tolerance, again
+/// from those joints at zero, and the closer of the two. Throws std::invalid_argument for a
 /// non-finite target, a wrong-size q or an unknown joint.
 GazeResult LookAt(const robot::RobotDescription& robot, const Eigen::VectorXd& q_current,
                   const Eigen::Vector3d& p_R_target, const GazeOptions& options = {});
