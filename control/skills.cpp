@@ -1740,6 +1740,7 @@ void BallGraspOptions::Validate() const {
   if (!(close_time > 0)) fail("close_time", close_time, "> 0");
   if (!(hold_time >= 0)) fail("hold_time", hold_time, ">= 0");
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
+  if (!(reach_rescue_max_error_m >= 0)) fail("reach_rescue_max_error_m", reach_rescue_max_error_m, ">= 0");
   transfer.Validate();
   waypoint.Validate();
   ik.Validate();
@@ -1786,11 +1787,24 @@ bool BallInReach(const robot::RobotDescription& desc, const Eigen::VectorXd& q_m
   IkOptions quick = options.ik;
   quick.presolve_restarts = std::min(quick.presolve_restarts, 5);
   quick.max_iterations = std::min(quick.max_iterations, 30);
-  CartesianSolver solver(chain, desc.HomeQ(), quick);
+  std::vector<Eigen::Isometry3d> poses;
   for (double tilt : options.tilts_rad) {
-    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, tilt, options)) {
-      if (Converged(solver.Solve(X, q_model))) return true;
-    }
+    for (const Eigen::Isometry3d& X : BallPalmPoses(p_RB, radius, tilt, options)) poses.push_back(X);
+  }
+  // Pass 0: the pre-solve alone; pass 1: Ipopt's rescue for the near misses only, in the same order.
+  IkOptions presolve_only = quick;
+  presolve_only.ipopt_after_failed_presolve = false;
+  CartesianSolver screen(chain, desc.HomeQ(), presolve_only);
+  std::vector<double> error(poses.size());
+  for (size_t i = 0; i < poses.size(); ++i) {
+    const IkResult r = screen.Solve(poses[i], q_model);
+    if (Converged(r)) return true;
+    error[i] = r.position_error_m;
+  }
+  if (!quick.ipopt_after_failed_presolve) return false;
+  CartesianSolver solver(chain, desc.HomeQ(), quick);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    if (error[i] <= options.reach_rescue_max_error_m && Converged(solver.Solve(poses[i], q_model))) return true;
   }
   return false;
 }

@@ -151,18 +151,24 @@ TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
   std::vector<SweepLine> lines = {GraspLine(0, "hoe_1", "pos1", true, ""),
                                   GraspLine(1, "hoe_1", "rot2", false, "slip: 6 mm"),
                                   GraspLine(2, "rake_1", "pos1", true, ""),
-                                  GraspLine(3, "rake_1", "rot2", true, "")};
+                                  GraspLine(3, "rake_1", "rot2", true, ""),
+                                  GraspLine(5, "rake_2", "rot2", false, "unreachable: no palm pose")};
   lines.push_back({{"protocol", "grasp-gt"}, {"index", 4}, {"id", "x/pos1"}, {"ok", false}, {"error", "crashed"}});
   ReportGrasp(request, lines);
   const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
-  EXPECT_EQ(summary["cases"], 4);
+  EXPECT_EQ(summary["cases"], 5);
   EXPECT_EQ(summary["failed_cases"], 1);
-  EXPECT_DOUBLE_EQ(summary["grasp_success_rate"].get<double>(), 0.75);
-  EXPECT_DOUBLE_EQ(summary["per_cell"]["rot2"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(summary["grasp_success_rate"].get<double>(), 0.6);
+  EXPECT_EQ(summary["cells_grasped"], 3);
+  EXPECT_EQ(summary["cells_out_of_reach"], 1);
+  EXPECT_DOUBLE_EQ(summary["grasp_success_rate_within_reach"].get<double>(), 0.75);
+  EXPECT_DOUBLE_EQ(summary["per_cell"]["rot2"].get<double>(), 1.0 / 3.0);
   EXPECT_DOUBLE_EQ(summary["per_tool"]["rake_1"].get<double>(), 1.0);
   EXPECT_EQ(summary["failure_reasons"]["slip"], 1);
   const std::string md = ReadText(request.out_dir / "summary.md");
   EXPECT_THAT(md, HasSubstr("![grasp success per cell](per_cell.png)"));
+  EXPECT_THAT(md, HasSubstr("Grasped 3 of 5 cells (60 %). 1 cells have no palm pose"));
+  EXPECT_THAT(md, HasSubstr("of the other 4, 75 % were grasped"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_cell.png"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_tool.png"));
 }

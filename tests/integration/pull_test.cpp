@@ -1,6 +1,7 @@
 // Pull, ball grasp and hand-over skills: bad input gives clear errors, an out-of-reach pull moves
 // nothing, and the hand-over fallback holds a tool put into the open hand (issue 4).
 #include <cmath>
+#include <limits>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -186,6 +187,34 @@ TEST(BallGraspTest, ABallAtTheEdgeOfReachIsInReachButNotWithinAMargin) {
             control::BallInReach(desc, desc.HomeQ(), at(inside - 0.01), radius));
   EXPECT_THAT([&] { control::BallWithinReach(desc, desc.HomeQ(), at(0.5), radius, -0.01); },
               ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("margin_m")));
+}
+
+// BallInReach runs Ipopt's rescue only for palm poses the pre-solve nearly reached
+// (reach_rescue_max_error_m): over the table it answers as the rescue of every pose does.
+TEST(BallGraspTest, ReachWithRescueOfNearMissesOnlyAgreesWithRescueOfEveryPose) {
+  SceneRequest request;
+  const LoadedScene scene = LoadScene(request);
+  const robot::RobotDescription& desc = scene.robot;
+  const sim::TableSpec& table = scene.spec.table;
+  const double radius = scene.spec.ball.radius;
+  control::BallGraspOptions every;
+  every.reach_rescue_max_error_m = std::numeric_limits<double>::infinity();
+  int in_reach = 0, out_of_reach = 0;
+  for (int i = 0; i < 6; ++i) {
+    for (int j = 0; j < 5; ++j) {
+      const Eigen::Vector3d p_RB(table.center.x() + table.size.x() * (i / 5.0 - 0.5),
+                                 table.center.y() + table.size.y() * (j / 4.0 - 0.5), table.top_z + radius);
+      const bool reach = control::BallInReach(desc, desc.HomeQ(), p_RB, radius);
+      EXPECT_EQ(reach, control::BallInReach(desc, desc.HomeQ(), p_RB, radius, every)) << "ball at " << p_RB.transpose();
+      ++(reach ? in_reach : out_of_reach);
+    }
+  }
+  EXPECT_GT(in_reach, 3);
+  EXPECT_GT(out_of_reach, 3);
+  control::BallGraspOptions bad;
+  bad.reach_rescue_max_error_m = -1;
+  EXPECT_THAT([&] { control::BallInReach(desc, desc.HomeQ(), Eigen::Vector3d(-0.4, 0, 0), radius, bad); },
+              ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("reach_rescue_max_error_m")));
 }
 
 TEST(HandOverTest, ToolPlacedInTheOpenHandIsHeldAndFlaggedAssisted) {
