@@ -264,6 +264,7 @@ int RunGraspBench(const BenchRequest& request) {
                           {"candidates_touching", r.grasp.candidates_touching},
                           {"last_touching", r.grasp.last_touching},
                           {"hand_touches_fixture", r.grasp.hand_touches_fixture},
+                          {"hand_touch_depth_m", r.grasp.hand_touch_depth_m},
                           {"plan_ms", r.grasp.plan_ms},
                           {"handle_in_hand", HandleInHandJson(r.handle_in_hand)},
                           {"sim_time_s", r.sim_time},

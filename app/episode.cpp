@@ -643,6 +643,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"transfer_raised", g.transfer_raised},
                    {"candidates_touching", g.candidates_touching},
                    {"hand_touches_fixture", g.hand_touches_fixture},
+                   {"hand_touch_depth_m", g.hand_touch_depth_m},
                    {"candidates_touching_neighbour", g.candidates_touching_neighbour},
                    {"last_neighbour_touch", g.last_neighbour_touch},
                    {"hand_touches_neighbour", g.hand_touches_neighbour},

@@ -101,6 +101,21 @@ std::optional<ClearanceHit> ArmClearance::Check(const Eigen::VectorXd& q_model) 
   return CheckAgainst(q_model, std::vector<bool>(obstacles_.size(), false));
 }
 
+std::optional<ClearanceHit> ArmClearance::Closest(const Eigen::VectorXd& q_model) const {
+  if (obstacles_.empty() || spheres_.empty()) return std::nullopt;
+  const std::vector<Eigen::Isometry3d> X_RL = LinkPoses(q_model);
+  ClearanceHit closest;
+  closest.distance_m = std::numeric_limits<double>::infinity();
+  for (const Sphere& sphere : spheres_) {
+    const Eigen::Vector3d p_R = X_RL[sphere.link] * sphere.p_L;
+    for (const ObstacleBox& box : obstacles_) {
+      const double distance = Distance(sphere, p_R, box);
+      if (distance < closest.distance_m) closest = {model_->links[sphere.link].name, box.name, p_R, distance};
+    }
+  }
+  return closest;
+}
+
 std::optional<ClearanceHit> ArmClearance::CheckLine(const Eigen::VectorXd& from, const Eigen::VectorXd& to,
                                                     double max_step_rad) const {
   if (!(max_step_rad > 0)) ThrowInvalid("ArmClearance::CheckLine: max_step_rad = ", max_step_rad, " (expected > 0)");

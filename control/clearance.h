@@ -48,6 +48,10 @@ class ArmClearance {
   /// (full model q; the hand's joints are replaced), or nothing.
   std::optional<ClearanceHit> Check(const Eigen::VectorXd& q_model) const;
 
+  /// The sphere that comes closest to an obstacle at posture q_model, however far (distance_m
+  /// negative: inside it by that much), or nothing without obstacles. The margin plays no part.
+  std::optional<ClearanceHit> Closest(const Eigen::VectorXd& q_model) const;
+
   /// Checks the straight joint-space line from `from` to `to` (inclusive of `to`, exclusive of
   /// `from`) at steps of at most max_step_rad (> 0) in any joint. Obstacles that the start
   /// posture already touches are left out (the arm cannot leave them without passing them).

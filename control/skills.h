@@ -102,6 +102,10 @@ struct GraspOptions {
   /// handle, and the closing fingers flick the tool off) are planned only when no other reachable
   /// pose, at any slide along the handle, has a complete path. false = rest cost alone decides.
   bool prefer_clear_hand = true;
+  /// Those poses are tried least deep first: by how far the open or preshaped hand would reach
+  /// into the fixture, in steps of this [m], > 0 (within a step: slide nearest the centre, then
+  /// rest cost). Infinity: slide and rest cost alone.
+  double touching_depth_step_m = 0.005;
   /// Things the hand should leave alone but may touch when nothing else is left: the other tools
   /// on the rack, as boxes around their perceived parts. A complete path on which the forearm or
   /// the open hand would come within obstacle_margin_m of one (at the staging pose, on the
@@ -183,6 +187,7 @@ struct GraspResult {
   int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
   std::string last_touching;    // the last of those: which link, which obstacle
   bool hand_touches_fixture = false;  // the chosen pose is one of those (no other had a path)
+  double hand_touch_depth_m = 0.0;    // then: how far its open or preshaped hand reaches into the fixture [m]
   int candidates_touching_neighbour = 0;  // complete paths on which the hand would touch a neighbour
   std::string last_neighbour_touch;       // the last of those: which link, which neighbour
   bool hand_touches_neighbour = false;    // the chosen path is one of those (no other was complete)

@@ -73,6 +73,30 @@ TEST_F(ArmClearanceTest, TheMarginCountsFromTheLinksSurface) {
   EXPECT_FALSE(ArmClearance(*robot_, {slab(top - 0.012)}, robot_->hand_open, 0.01).Check(q).has_value());
 }
 
+TEST_F(ArmClearanceTest, ClosestMeasuresHowDeepTheArmReachesIntoABox) {
+  const Eigen::VectorXd q = robot_->HomeQ();
+  const Eigen::Vector3d palm = Palm(q);
+  auto slab = [&](double top_z) {
+    return Box("slab", Eigen::Vector3d(palm.x(), palm.y(), top_z - 0.05), Eigen::Vector3d(0.5, 0.5, 0.05));
+  };
+  // The slab's top raised by 1 cm steps: the lowest point of the arm goes 1 cm deeper each time.
+  const auto clear = ArmClearance(*robot_, {slab(palm.z() - 0.2)}, robot_->hand_open, 0.0).Closest(q);
+  ASSERT_TRUE(clear.has_value());
+  EXPECT_GT(clear->distance_m, 0.0);
+  EXPECT_EQ(clear->obstacle, "slab");
+  double last = clear->distance_m;
+  for (int i = 1; i <= 5; ++i) {
+    const auto hit = ArmClearance(*robot_, {slab(palm.z() - 0.2 + 0.01 * i)}, robot_->hand_open, 0.0).Closest(q);
+    ASSERT_TRUE(hit.has_value());
+    EXPECT_NEAR(hit->distance_m, last - 0.01, 1e-9);
+    last = hit->distance_m;
+  }
+  // Check finds the same thing once the box is within the margin.
+  EXPECT_EQ(ArmClearance(*robot_, {slab(palm.z() - 0.2)}, robot_->hand_open, 0.0).Check(q).has_value(),
+            clear->distance_m < 0.0);
+  EXPECT_FALSE(ArmClearance(*robot_, {}, robot_->hand_open, 0.01).Closest(q).has_value());
+}
+
 TEST_F(ArmClearanceTest, ALineBetweenClearPosturesCanPassThroughABox) {
   const Eigen::VectorXd a = ShoulderPitch(-0.6);
   const Eigen::VectorXd b = ShoulderPitch(0.6);
