@@ -306,6 +306,18 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     return result;
   };
 
+  // A ball seen more than kBallOffTableM below where it would rest on the table top lies on the
+  // floor: an action or a put-down swept it off the table, and nothing is left to pull or grasp
+  // (random-50 seed 1 ep 40 planned a second pull to a ball 0.5 m below the table). Names it.
+  auto off_table = [&](const perception::BallDetection& seen, StageRecord& s) {
+    const double below = BallBelowTable(spec.table, ball_radius, seen.p_RB);
+    if (seen.status != perception::BallStatus::kFound || below <= kBallOffTableM) return false;
+    s.ok = false;
+    s.outcome = "ball_off_table";
+    s.reason = Cat("the ball was seen ", below, " m below where it would rest on the table top: it fell off");
+    return true;
+  };
+
   // ---- 1. Look at the table and find the ball. ----
   perception::BallDetection ball;
   // The looks made with an empty hand away from everything (the first look at the table, the
@@ -349,6 +361,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.ok = ball.status == perception::BallStatus::kFound;
       s.outcome = s.ok ? "ball_found" : "no_ball";
       s.reason = ball.reason;
+      off_table(ball, s);
       s.details = {{"gaze_converged", converged},
                    {"looks", looks},
                    {"arm_moved_aside", arm_aside},
@@ -776,7 +789,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details = {{"motion_arrived", look.motion.reached},
                    {"gaze_converged", look.gaze.converged},
                    {"ball_R", Vec3(seen.p_RB)}};
-      ball_located = seen.status == perception::BallStatus::kFound;
+      ball_located = seen.status == perception::BallStatus::kFound && !off_table(seen, s);
       if (ball_located) ball_expected_R = seen.p_RB;
       stage_frame(s.name);
     };
@@ -852,6 +865,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
   }
 
   return finish();
+}
+
+double BallBelowTable(const sim::TableSpec& table, double radius, const Eigen::Vector3d& p_RB) {
+  return table.top_z + radius - p_RB.z();
 }
 
 nlohmann::json EpisodeJson(const EpisodeResult& r) {

@@ -97,6 +97,14 @@ struct EpisodeResult {
 /// malformed); a stage that fails is a result.
 EpisodeResult RunEpisode(const EpisodeRequest& request);
 
+/// A ball seen more than this far below where it would rest on the table top lies on the floor:
+/// an action or a put-down swept it off the table, and nothing is left to pull or grasp [m].
+inline constexpr double kBallOffTableM = 0.05;
+
+/// How far below where a ball of `radius` would rest on the table top it was seen, at p_RB in R
+/// [m] (negative: above it).
+double BallBelowTable(const sim::TableSpec& table, double radius, const Eigen::Vector3d& p_RB);
+
 /// The result as JSON (result.json, one results.jsonl line).
 nlohmann::json EpisodeJson(const EpisodeResult& result);
 
