@@ -33,6 +33,9 @@ void WriteGraspReport(const std::filesystem::path& out_dir, const nlohmann::json
      << "Seed " << summary["seed"] << ", " << summary["cases"] << " cases run, " << summary["failed_cases"]
      << " failed to run (see results.jsonl). Success: " << summary["success_criterion"].get<std::string>()
      << ".\n\n"
+     << (summary["start"] == "rack_look"
+             ? "The arm started as in an episode, after the look at the rack (torso turned, hand beside the hip).\n\n"
+             : "The arm started from the home posture.\n\n")
      << fmt::format("Grasped {} of {} cells ({:.0f} %). {} cells have no palm pose on the handle within the arm's "
                     "reach (grasp status `unreachable`: IK with the approach filters); of the other {}, {:.0f} % "
                     "were grasped.\n\n",
@@ -142,6 +145,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
   const Eigen::Isometry3d X_RH = X_RW * X_WT_rest * X_TH;
 
   sim::SimRobot robot(world);
+  if (options.from_rack_look) LookAt(robot, scene.robot, RackViewTarget(scene.spec), /*arm_down=*/true);
   control::GraspOptions grasp_options = options.grasp;
   grasp_options.obstacles = WorkspaceObstacles(scene.spec);
   if (options.slide_along_handle) {
@@ -234,17 +238,20 @@ int RunGraspBench(const BenchRequest& request) {
   std::vector<std::string> cells;
   for (std::string_view cell : sim::kCellNames) cells.emplace_back(cell);
   const std::vector<SweepCase> cases = ToolCellCases(SortedToolNames(scene.library), cells);
+  GraspCaseOptions case_options;
+  case_options.from_rack_look = request.from_rack_look;
   auto run_case = [&](const SweepCase& c) {
     const std::string tool = c.params.at("tool");
     const std::string cell = c.params.at("cell");
     const GraspCaseResult r =
-        RunGraspCase(scene, tool, cell, request.seed, {},
+        RunGraspCase(scene, tool, cell, request.seed, case_options,
                      request.frames ? request.out_dir / "frames" / (tool + "_" + cell + ".png") : std::filesystem::path());
     spdlog::info("grasp-gt {} {}: {} {} (lift {:.3f} m, slip {:.1f} mm, {:.0f} ms)", tool, cell,
                  r.success ? "ok" : "FAIL", r.reason, r.lift_m, r.slip_m * 1000, r.wall_ms);
     const Eigen::Vector3d p = r.grasp.X_RP_grasp.translation();
     return nlohmann::json{{"tool", tool},
                           {"cell", cell},
+                          {"start", request.from_rack_look ? "rack_look" : "home"},
                           {"success", r.success},
                           {"reason", r.reason},
                           {"grasp_status", control::ToString(r.grasp.status)},
@@ -270,7 +277,8 @@ int RunGraspBench(const BenchRequest& request) {
                           {"sim_time_s", r.sim_time},
                           {"wall_ms", r.wall_ms}};
   };
-  ReportGrasp(request, RunSweep(SweepOptionsFor(request, "grasp-gt"), cases, run_case));
+  ReportGrasp(request, RunSweep(SweepOptionsFor(request, "grasp-gt", {{"from_rack_look", request.from_rack_look}}),
+                                cases, run_case));
   return 0;
 }
 
@@ -310,6 +318,12 @@ void ReportGrasp(const BenchRequest& request, const std::vector<SweepLine>& line
   summary["cells_grasped"] = total.ok;
   summary["cells_out_of_reach"] = out_of_reach;
   summary["grasp_success_rate_within_reach"] = Tally{total.n - out_of_reach, total.ok}.Rate();
+  // Where the arm started (one value per run; "home" for lines written before it was recorded).
+  std::string start = "home";
+  for (const SweepLine& line : lines) {
+    if (line.value("ok", false)) start = line["result"].value("start", std::string("home"));
+  }
+  summary["start"] = start;
   summary["success_criterion"] =
       "tool >= 5 cm above rest, handle moves < 5 mm in the palm frame and touches only r_* bodies during a 2 s hold";
   for (const auto& [name, t] : per_tool) summary["per_tool"][name] = t.Rate();

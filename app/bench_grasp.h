@@ -26,6 +26,10 @@ struct GraspCaseOptions {
   /// grasp length) / 2 - slide_margin_m of the tool's model (the ground-truth handle segment).
   bool slide_along_handle = true;
   double slide_margin_m = 0.01;  // [m], >= 0
+  /// Grasp as the episode does: after the look at the rack (LookAt RackViewTarget with the arm
+  /// down: the torso turned toward the rack, the hand hanging beside the hip, below the top of the
+  /// rack's ledge) instead of from the home posture.
+  bool from_rack_look = false;
   control::GraspOptions grasp;   // the skill's options
   void Validate() const;         // throws std::invalid_argument naming the field and its value
 };

@@ -282,6 +282,9 @@ int main(int argc, char** argv) {
     bench->add_flag("--best-tool-only", bench_request.best_tool_only,
                     "random: episodes ask for a hand-over of the best-predicted tool when its "
                     "handle is out of reach instead of grasping the next best tool within reach");
+    bench->add_flag("--from-rack-look", bench_request.from_rack_look,
+                    "grasp-gt: grasp as the episode does, after the look at the rack (torso turned, hand "
+                    "hanging beside the hip) instead of from the home posture");
     bench->add_flag("--hindsight", bench_request.hindsight,
                     "random: also pull with every tool of each episode's rack from its ground-truth handle "
                     "and score the choice against the best in hindsight (about 10 s more per tool)");

@@ -183,7 +183,7 @@ struct GraspResult {
   double plan_ms = 0.0;         // wall time of choosing and planning (all IK) [ms], informational
   int paths_blocked = 0;        // complete paths rejected: the transfer would hit an obstacle
   std::string last_blocked;     // the last of those: which link, which obstacle, where
-  bool transfer_raised = false; // the chosen transfer goes through the raised palm pose first
+  bool transfer_raised = false; // the chosen transfer goes through via postures (palm raised, or joint by joint)
   int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
   std::string last_touching;    // the last of those: which link, which obstacle
   bool hand_touches_fixture = false;  // the chosen pose is one of those (no other had a path)

@@ -160,6 +160,7 @@ TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
   EXPECT_EQ(summary["failed_cases"], 1);
   EXPECT_DOUBLE_EQ(summary["grasp_success_rate"].get<double>(), 0.6);
   EXPECT_EQ(summary["cells_grasped"], 3);
+  EXPECT_EQ(summary["start"], "home");  // lines without "start" came from the home posture
   EXPECT_EQ(summary["cells_out_of_reach"], 1);
   EXPECT_DOUBLE_EQ(summary["grasp_success_rate_within_reach"].get<double>(), 0.75);
   EXPECT_DOUBLE_EQ(summary["per_cell"]["rot2"].get<double>(), 1.0 / 3.0);
@@ -169,6 +170,7 @@ TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
   EXPECT_THAT(md, HasSubstr("![grasp success per cell](per_cell.png)"));
   EXPECT_THAT(md, HasSubstr("Grasped 3 of 5 cells (60 %). 1 cells have no palm pose"));
   EXPECT_THAT(md, HasSubstr("of the other 4, 75 % were grasped"));
+  EXPECT_THAT(md, HasSubstr("started from the home posture"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_cell.png"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_tool.png"));
 }
@@ -272,6 +274,10 @@ TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   request.extended = false;
   request.hindsight = true;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--hindsight")));
+  request.hindsight = false;
+  request.protocol = "random";
+  request.from_rack_look = true;
+  EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--from-rack-look")));
 }
 
 }  // namespace

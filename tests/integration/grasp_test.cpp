@@ -111,6 +111,32 @@ TEST(GraspHandle, RoutesTheTransferOverTheRacksLedge) {
   EXPECT_EQ(routed.grasp.status, control::GraspStatus::kGrasped) << routed.grasp.reason;
 }
 
+// stick_2 at the rack's end beside the robot (pos1), grasped as the episode grasps it: after the
+// look at the rack, whose torso turn leaves the hand hanging beside the hip below the top of the
+// rack's ledge. Every palm-raising route to the clear grasp poses swept the fingers through the
+// ledge's near end, and the grasp took a pose with the hand against the rack: the hand closed on
+// nothing and the stick fell (so did 5 of the 96 pos1, rot1 and pos2 cells grasped from there,
+// and 7 of the 13 failed tool grasps of random-50 seeds 1 and 2 followed such blocks). The arm
+// bends up first, then swings out: the transfer clears the rack, the chosen pose keeps the hand
+// clear of it, and the stick is grasped and lifted.
+TEST(GraspHandle, BendsTheArmUpFirstWhenTheHandHangsBelowTheLedge) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  request.cells = {"pos1"};
+  const LoadedScene scene = LoadScene(request);
+  GraspCaseOptions after_look;
+  after_look.from_rack_look = true;
+  const GraspCaseResult r = RunGraspCase(scene, "stick_2", "pos1", request.seed, after_look);
+  EXPECT_TRUE(r.grasp.transfer_raised) << "the direct swing no longer meets the rack: pick another case";
+  EXPECT_FALSE(r.grasp.hand_touches_fixture) << r.grasp.last_touching << "; " << r.grasp.paths_blocked
+                                             << " paths blocked, the last: " << r.grasp.last_blocked;
+  for (const auto& h : r.handle_in_hand) {
+    if (h.stage != "staged" && h.stage != "at_grasp") continue;
+    for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
+  }
+  ExpectGraspedLiftedAndHeld(r);
+}
+
 // stick_2 at the rack's end beside the robot (pos1): the reachable palm pose of lowest rest cost
 // puts the open hand's fingertips against the rack's board, which stops the palm 7 mm short of the
 // handle and tilted, and the closing fingers flick the stick off the rack (9 of the 10 failures at
