@@ -833,6 +833,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"yaws_near_ball", d.yaws_kept_out},
                    {"paths_near_ball", d.paths_kept_out},
                    {"hand_cleared", hand_cleared},
+                   {"rise_retraced", d.rise_retraced},
+                   {"rise_reason", d.rise_reason},
                    {"clear_reason", put.clear_reason}};
       stage_frame("put_down");
     });

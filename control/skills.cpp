@@ -1730,7 +1730,19 @@ PutDownResult PutDown(RobotInterface& robot, const robot::RobotDescription& desc
     // dragged the tool it had just let go of).
     const Eigen::Vector3d p_open =
         chain.TipPose(ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders())).translation();
-    MovePalmThrough(robot, desc, {p_open + options.retreat_up_m * up}, options.clear);
+    const PalmPathResult rise = MovePalmThrough(robot, desc, {p_open + options.retreat_up_m * up}, options.clear);
+    if (rise.points_reached == 0 && options.retreat_up_m > 0) {
+      // Back through the descent's postures that lie above the hand now, to the pose above.
+      const double z_now = chain.TipPose(ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders())).translation().z();
+      std::vector<Eigen::VectorXd> back;
+      for (auto it = down.rbegin() + 1; it != down.rend(); ++it) {
+        if (chain.TipPose(*it).translation().z() > z_now) back.push_back(*it);
+      }
+      back.push_back(above.q);
+      FollowWaypoints(robot, chain, back, step);
+      result.rise_retraced = true;
+      result.rise_reason = rise.reason;
+    }
     result.placed = true;
     result.X_RP = X_RP;
     return result;

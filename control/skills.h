@@ -613,6 +613,12 @@ struct PutDownResult {
   int yaws_off_surface = 0;      // palm poses rejected: the tool's centroid off PutDownOptions::support_xy
   int yaws_kept_out = 0;         // palm poses rejected: a tool point near a keep-out centre
   int paths_kept_out = 0;        // palm poses rejected: the way there brings a tool point near one
+  /// The open hand's straight rise was cut short (IK from where the hand really is, at its
+  /// orientation there): it went back up the way it came down instead, to 10 cm above the
+  /// release pose. Without that it stayed beside the tool it had let go of, and the next move
+  /// dragged the hand across the tool (random-50 seed 2: 2 of 5 failed ball grasps).
+  bool rise_retraced = false;
+  std::string rise_reason;       // then: why the rise was cut short
 };
 
 /// Puts a held tool down: moves the palm so that the tool hangs above `p_R_place` (a free spot on

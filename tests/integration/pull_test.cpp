@@ -386,5 +386,32 @@ TEST(PutDownTest, LaysTheToolsOwnAxisLevelWhenItIsHeldAskew) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("tool_axis_T")));
 }
 
+// When the open hand's straight rise cannot be planned (here: no joint may move at all between
+// waypoints), the hand goes back up the way it came down, to 10 cm above where it opened, rather
+// than staying beside the tool it let go of.
+TEST(PutDownTest, RetracesTheDescentWhenTheRiseCannotBePlanned) {
+  auto put_down = [](const control::PutDownOptions& options) {
+    SettledScene settled("put-down rise");
+    const LoadedScene& scene = settled.scene;
+    const Eigen::Vector3d place(-0.3, 0.05, scene.spec.table.top_z);
+    const control::PutDownResult r =
+        control::PutDown(settled.robot, scene.robot, PalmGraspFrame(scene.robot), place, 0.01, options);
+    const double rise = PalmPoseFromEncoders(scene.robot, settled.robot).translation().z() - r.X_RP.translation().z();
+    return std::make_pair(r, rise);
+  };
+  control::PutDownOptions options;
+  options.tool_points_T = RodPoints();
+  const auto [straight, straight_rise] = put_down(options);
+  ASSERT_TRUE(straight.placed) << straight.reason;
+  EXPECT_FALSE(straight.rise_retraced) << straight.rise_reason;
+  EXPECT_NEAR(straight_rise, options.retreat_up_m, 0.02);
+  options.clear.max_joint_step_rad = 1e-9;
+  const auto [retraced, retraced_rise] = put_down(options);
+  ASSERT_TRUE(retraced.placed) << retraced.reason;
+  EXPECT_TRUE(retraced.rise_retraced);
+  EXPECT_THAT(retraced.rise_reason, HasSubstr("stopped after waypoint 0"));
+  EXPECT_NEAR(retraced_rise, 0.10, 0.02);
+}
+
 }  // namespace
 }  // namespace toolbench::app
