@@ -178,7 +178,7 @@ void GraspOptions::Validate() const {
   if (!(hold_time >= 0)) fail("hold_time", hold_time, ">= 0");
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
   if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
-  if (screening_ipopt_iterations < 1) fail("screening_ipopt_iterations", screening_ipopt_iterations, "> 0");
+  if (screening_ipopt_iterations < 0) fail("screening_ipopt_iterations", screening_ipopt_iterations, ">= 0");
   if (fallback_restarts < 0) fail("fallback_restarts", fallback_restarts, ">= 0");
   if (fallback_ipopt_iterations < 1) fail("fallback_ipopt_iterations", fallback_ipopt_iterations, "> 0");
   if (!(fallback_min_approach_cos >= -1 && fallback_min_approach_cos <= 1)) {
@@ -487,7 +487,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // cost first. Nothing moves before a plan is complete.
   IkOptions screen_options = options.ik;
   screen_options.presolve_restarts = options.screening_restarts;
-  screen_options.max_iterations = options.screening_ipopt_iterations;
+  screen_options.max_iterations = std::max(1, options.screening_ipopt_iterations);
+  screen_options.ipopt_after_failed_presolve = options.screening_ipopt_iterations > 0;
   IkOptions fallback_options = options.ik;
   fallback_options.presolve_restarts = options.fallback_restarts;
   fallback_options.max_iterations = options.fallback_ipopt_iterations;
