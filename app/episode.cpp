@@ -590,9 +590,6 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       control::GraspResult g;
       control::GraspResult first;
       double z0 = 0.0;
-      auto failed = [](const control::GraspResult& r) {
-        return r.status == control::GraspStatus::kUnreachable || r.status == control::GraspStatus::kIkFailed;
-      };
       auto try_tool = [&](int segment, bool neighbour_contact_allowed) {
         select_tool(segment);
         grasp_options.neighbours = NeighbourBoxes(analysis.tools, static_cast<size_t>(segment));
@@ -612,13 +609,13 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         if (k > 0 && request.best_tool_only) break;
         try_tool(ranking[k], !others_to_try);
         if (k == 0) first = g;
-        if (!failed(g)) break;
+        if (!control::PlanningFailed(g.status)) break;
         if (neighbour_blocked < 0 && !grasp_options.neighbour_contact_allowed && g.candidates_touching_neighbour > 0) {
           neighbour_blocked = ranking[k];
         }
       }
-      if (failed(g) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
-      if (failed(g)) {
+      if (control::PlanningFailed(g.status) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
+      if (control::PlanningFailed(g.status)) {
         // No tool within reach: the hand-over brings the first choice.
         select_tool(first_choice);
         z0 = world.ground_truth().Pose(tool_body).translation().z();
@@ -745,8 +742,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       const control::ToolEffector effector = EffectorOf(*model);
       pull_options.on_stage = [&](const char* stage) { stage_frame(std::string("action_") + stage); };
       control::PullResult p = control::PullObject(robot, desc, X_PT, effector, p_RB, ball_radius, pull_options);
-      if ((p.status == control::PullStatus::kUnreachable || p.status == control::PullStatus::kIkFailed) &&
-          !result.assisted && allow_regrip) {
+      if (control::PlanningFailed(p.status) && !result.assisted && allow_regrip) {
         // The robot's own grip leaves no way to put the effector behind the ball (a tool taken
         // from the rack's edge, or turned in the grip as it came up); nothing has moved. It asks
         // for the tool the way the hand-over gives it and plans again.
@@ -806,7 +802,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       run_stage("pull_again", [&](StageRecord& s) {
         const control::PullStatus status = act(s, ball_expected_R, /*allow_regrip=*/false);
         // No plan from the grip as it is now: nothing moved, the first pull's result stands.
-        if (status == control::PullStatus::kUnreachable || status == control::PullStatus::kIkFailed) s.ok = true;
+        if (control::PlanningFailed(status)) s.ok = true;
       });
       ball_located = false;
       run_stage("locate_ball_again", locate_ball);

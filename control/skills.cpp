@@ -205,6 +205,10 @@ const char* ToString(GraspStatus status) {
   return "unknown";
 }
 
+bool PlanningFailed(GraspStatus status) {
+  return status == GraspStatus::kUnreachable || status == GraspStatus::kIkFailed;
+}
+
 namespace {
 
 // Where the open hand (`open`), or the preshaped one (`preshaped`: the thumb swung into
@@ -910,6 +914,8 @@ const char* ToString(PullStatus status) {
   return "unknown";
 }
 
+bool PlanningFailed(PullStatus status) { return status == PullStatus::kUnreachable || status == PullStatus::kIkFailed; }
+
 Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector) {
   if (!X_RH.matrix().allFinite() || !p_R_effector.allFinite()) {
     ThrowInvalid("HandleTowardEffector: X_RH or p_R_effector = (", p_R_effector.transpose(), ") is not finite");
@@ -954,7 +960,7 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
     last.last_neighbour_touch = last_neighbour_touch;
     last.slide_m = (X_RH_grasped.translation() - X_RH.translation()).dot(z_H) +
                    last.slide_m * X_RH_grasped.linear().col(2).dot(z_H);
-    return last.status != GraspStatus::kUnreachable && last.status != GraspStatus::kIkFailed;
+    return !PlanningFailed(last.status);
   };
   // A transfer blocked on the way (the open hand caught on a neighbouring tool or the rack: the
   // grasp plans against the arm's reach, not against collisions) goes back to where it started

@@ -171,6 +171,9 @@ enum class GraspStatus {
 /// Human-readable name of a status ("grasped", "unreachable", ...).
 const char* ToString(GraspStatus status);
 
+/// Whether a grasp failed in planning, before anything moved (kUnreachable or kIkFailed).
+bool PlanningFailed(GraspStatus status);
+
 /// Outcome of GraspHandle.
 struct GraspResult {
   GraspStatus status = GraspStatus::kUnreachable;
@@ -446,6 +449,9 @@ enum class PullStatus {
 
 /// Human-readable name of a status ("pulled", "unreachable", ...).
 const char* ToString(PullStatus status);
+
+/// Whether an action failed in planning, before anything moved (kUnreachable or kIkFailed).
+bool PlanningFailed(PullStatus status);
 
 /// Outcome of PullObject.
 struct PullResult {

@@ -31,6 +31,21 @@ TEST(ToolActionTest, NamesRoundTrip) {
   EXPECT_EQ(ParseToolAction("drag"), std::nullopt);
 }
 
+// Failures in planning (nothing moved) are told from failures in the motion, for grasps and actions alike.
+TEST(ToolActionTest, PlanningFailuresAreTheOnesBeforeAnythingMoved) {
+  using control::GraspStatus;
+  using control::PullStatus;
+  for (GraspStatus s : {GraspStatus::kUnreachable, GraspStatus::kIkFailed}) EXPECT_TRUE(control::PlanningFailed(s));
+  for (GraspStatus s : {GraspStatus::kGrasped, GraspStatus::kMotionTimeout, GraspStatus::kEmptyHand,
+                        GraspStatus::kDropped}) {
+    EXPECT_FALSE(control::PlanningFailed(s)) << control::ToString(s);
+  }
+  for (PullStatus s : {PullStatus::kUnreachable, PullStatus::kIkFailed}) EXPECT_TRUE(control::PlanningFailed(s));
+  for (PullStatus s : {PullStatus::kPulled, PullStatus::kMotionTimeout, PullStatus::kLostTool}) {
+    EXPECT_FALSE(control::PlanningFailed(s)) << control::ToString(s);
+  }
+}
+
 TEST(ToolActionTest, DirectionsInTheRootFrame) {
   // Object straight in front of the robot (x_R points backward, y_R to the robot's right).
   const Eigen::Vector3d front(-0.5, 0.0, -0.07);
