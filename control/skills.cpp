@@ -219,14 +219,25 @@ std::optional<ClearanceHit> HandHitAtGrasp(const ArmClearance& open, const ArmCl
   return preshaped.Check(q_model);
 }
 
-// How far the open or the preshaped hand would reach into a fixture at the grasp posture q_model
-// [m] (the deeper of the two; negative: clear by that much).
-double HandDepthAtGrasp(const ArmClearance& open, const ArmClearance& preshaped, const Eigen::VectorXd& q_model) {
-  double depth = -std::numeric_limits<double>::infinity();
-  for (const ArmClearance* hand : {&open, &preshaped}) {
-    if (auto closest = hand->Closest(q_model)) depth = std::max(depth, -closest->distance_m);
+// Where the open or the preshaped hand comes closest to a fixture at the grasp posture q_model
+// (the nearer of the two; distance_m negative: that deep inside), or nothing without fixtures.
+std::optional<ClearanceHit> HandClosestAtGrasp(const ArmClearance& open, const ArmClearance& preshaped,
+                                               const Eigen::VectorXd& q_model) {
+  std::optional<ClearanceHit> closest = open.Closest(q_model);
+  if (auto other = preshaped.Closest(q_model); other && (!closest || other->distance_m < closest->distance_m)) {
+    closest = other;
   }
-  return depth;
+  return closest;
+}
+
+// The IK options of a cheap screening of many candidate poses (most out of reach): `restarts`
+// pre-solve restarts, and `ipopt_iterations` of Ipopt after a failed pre-solve (0: no Ipopt).
+IkOptions ScreeningIk(const IkOptions& base, int restarts, int ipopt_iterations) {
+  IkOptions o = base;
+  o.presolve_restarts = restarts;
+  o.max_iterations = std::max(1, ipopt_iterations);
+  o.ipopt_after_failed_presolve = ipopt_iterations > 0;
+  return o;
 }
 
 /// Checks a planned grasp path's joint-space transfer from q_now to plan->q_pregrasp against the
@@ -284,7 +295,8 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   // taking a pose that touched the rack instead). The arm bends up in front of the body first
   // (shoulder pitch, elbow, wrist to their end values), then swings out; or the arm moves to its
   // end posture first, the torso last.
-  auto with = [&](const Eigen::VectorXd& base, const Eigen::VectorXd& from, std::initializer_list<std::string_view> joints) {
+  auto with = [&](const Eigen::VectorXd& base, const Eigen::VectorXd& from,
+                  std::initializer_list<std::string_view> joints) {
     Eigen::VectorXd q = base;
     for (int i = 0; i < chain.num_joints(); ++i) {
       if (std::find(joints.begin(), joints.end(), chain.joint_names()[i]) != joints.end()) {
@@ -489,10 +501,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // reach, and a full failing solve costs ~30 restarts plus Ipopt); slide offsets are tried
   // nearest the handle centre first and the first offset with a complete path wins, lowest rest
   // cost first. Nothing moves before a plan is complete.
-  IkOptions screen_options = options.ik;
-  screen_options.presolve_restarts = options.screening_restarts;
-  screen_options.max_iterations = std::max(1, options.screening_ipopt_iterations);
-  screen_options.ipopt_after_failed_presolve = options.screening_ipopt_iterations > 0;
+  const IkOptions screen_options =
+      ScreeningIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
   IkOptions fallback_options = options.ik;
   fallback_options.presolve_restarts = options.fallback_restarts;
   fallback_options.max_iterations = options.fallback_ipopt_iterations;
@@ -578,10 +588,11 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
                        [](const Candidate& a, const Candidate& b) { return a.ik.rest_cost < b.ik.rest_cost; });
       for (Candidate& c : feasible) {
         if (!clearance.empty() && options.prefer_clear_hand) {
-          if (auto hit = HandHitAtGrasp(clearance, preshaped, c.ik.q)) {
+          const std::optional<ClearanceHit> hit = HandClosestAtGrasp(clearance, preshaped, c.ik.q);
+          if (hit && hit->distance_m < options.obstacle_margin_m) {
             ++result.candidates_touching;
             result.last_touching = Cat(hit->link, " within ", options.obstacle_margin_m, " m of ", hit->obstacle);
-            c.depth = HandDepthAtGrasp(clearance, preshaped, c.ik.q);
+            c.depth = -hit->distance_m;
             touching.push_back(std::move(c));
             continue;
           }
@@ -1076,10 +1087,8 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
-  IkOptions screen_options = options.ik;
-  screen_options.presolve_restarts = options.screening_restarts;
-  screen_options.max_iterations = std::max(1, options.screening_ipopt_iterations);
-  screen_options.ipopt_after_failed_presolve = options.screening_ipopt_iterations > 0;
+  const IkOptions screen_options =
+      ScreeningIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
   CartesianSolver screen(chain, desc.HomeQ(), screen_options);
   IkOptions loose_options = screen_options;
   loose_options.position_tolerance_m = std::max(options.ik.position_tolerance_m, options.start_tolerance_m);
