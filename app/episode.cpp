@@ -761,6 +761,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details["pull_dir_R"] = Vec3(p.pull_dir_R);
       s.details["pull_turn_deg"] = p.pull_turn_rad * 180 / M_PI;
       s.details["working_cos"] = p.working_cos;
+      s.details["pull_elevation_deg"] = p.elevation_rad * 180 / M_PI;
+      s.details["pull_yaw_deg"] = p.yaw_rad * 180 / M_PI;
+      s.details["pull_roll_deg"] = p.roll_rad * 180 / M_PI;
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
       return p.status;

@@ -30,12 +30,29 @@ void MotionOptions::Validate() const {
   require(timeout >= 0, "timeout", timeout, ">= 0");
   require(max_speed >= 0 && std::isfinite(max_speed), "max_speed", max_speed, ">= 0");
   require(min_duration > 0, "min_duration", min_duration, "> 0");
+  require(cruise_blend >= 0 && cruise_blend <= 0.5, "cruise_blend", cruise_blend, "in [0, 0.5]");
 }
 
 double MotionOptions::TrajectoryTime(double span, double fixed) const {
   if (max_speed <= 0) return fixed;
   constexpr double kMinJerkPeak = 1.875;  // max of dMinJerk/dtau, at tau = 1/2
-  return std::min(fixed, std::max(min_duration, kMinJerkPeak * span / max_speed));
+  const double peak = cruise_blend > 0 ? 1.0 / (1.0 - cruise_blend) : kMinJerkPeak;
+  return std::min(fixed, std::max(min_duration, peak * span / max_speed));
+}
+
+double CruiseProfile(double tau, double blend) {
+  if (!(blend <= 0.5)) ThrowInvalid("CruiseProfile: blend = ", blend, " (expected <= 0.5)");
+  const double s = std::clamp(tau, 0.0, 1.0);
+  if (blend <= 0) return MinJerk(s);
+  const double v = 1.0 / (1.0 - blend);  // cruise speed; each ramp covers v * blend / 2
+  // Distance covered by a ramp after x [time fraction], velocity v * smoothstep(x / blend).
+  auto ramp = [&](double x) {
+    const double y = x / blend;
+    return v * blend * (y * y * y - 0.5 * y * y * y * y);
+  };
+  if (s <= blend) return ramp(s);
+  if (s >= 1.0 - blend) return 1.0 - ramp(1.0 - s);
+  return v * blend / 2 + v * (s - blend);
 }
 
 namespace {
@@ -96,7 +113,7 @@ MotionResult MoveJoints(RobotInterface& robot, const std::map<std::string, doubl
   const double t0 = robot.Time();
   const double duration = options.TrajectoryTime((target - start).cwiseAbs().maxCoeff(), options.duration);
   for (double t = options.command_period; t < duration + 1e-9; t += options.command_period) {
-    robot.SetPositionTargets(MinJerkPoint(start, target, t, duration));
+    robot.SetPositionTargets(start + (target - start) * CruiseProfile(t / duration, options.cruise_blend));
     robot.Wait(options.command_period);
     if (each_period) each_period();
   }
@@ -126,7 +143,7 @@ MotionResult MoveThrough(RobotInterface& robot, const std::vector<std::map<std::
   const double duration = options.TrajectoryTime(length, options.duration * static_cast<double>(goals.size()));
   size_t segment = 1;
   for (double t = options.command_period; t < duration + 1e-9; t += options.command_period) {
-    const double s = length * MinJerk(t / duration);
+    const double s = length * CruiseProfile(t / duration, options.cruise_blend);
     while (segment + 1 < vertices.size() && at[segment] < s) ++segment;
     const double span = at[segment] - at[segment - 1];
     const double f = span > 0 ? std::clamp((s - at[segment - 1]) / span, 0.0, 1.0) : 1.0;

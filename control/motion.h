@@ -15,6 +15,13 @@ namespace toolbench::control {
 /// zero velocity and acceleration at both ends.
 double MinJerk(double tau);
 
+/// Time scaling s(tau) in [0, 1] for tau in [0, 1] (clamped) that cruises at constant speed
+/// 1 / (1 - blend) between a smooth (smoothstep-velocity) start and stop, each taking the fraction
+/// blend of the time; blend in (0, 0.5]; blend <= 0 gives MinJerk. Zero velocity at both ends and
+/// a peak speed 1 / (1 - blend) times the mean (minimum jerk: 1.875). Throws
+/// std::invalid_argument for blend > 0.5 or NaN.
+double CruiseProfile(double tau, double blend);
+
 /// Joint positions on the minimum-jerk path from q0 to q1 at time t of a motion lasting T [s].
 Eigen::VectorXd MinJerkPoint(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1, double t,
                              double T);
@@ -32,6 +39,9 @@ struct MotionOptions {
   /// one. 0: every motion lasts duration.
   double max_speed = 0.0;
   double min_duration = 0.3;    // [s], > 0; used with max_speed
+  /// Time scaling: 0 = minimum jerk; in (0, 0.5]: CruiseProfile with this blend (constant speed
+  /// between short start and stop ramps, for pushing something along at an even pace).
+  double cruise_blend = 0.0;
   /// The trajectory time [s] of a motion whose largest joint change (MoveThrough: joint-space
   /// path length, segments by their largest joint change) is `span` [rad], >= 0, and whose fixed
   /// time would be `fixed` [s].

@@ -911,6 +911,7 @@ void PullOptions::Validate() const {
   if (screening_ipopt_iterations < 0) fail("screening_ipopt_iterations", screening_ipopt_iterations, ">= 0");
   transfer.Validate();
   waypoint.Validate();
+  drag.Validate();
   ik.Validate();
 }
 
@@ -1585,7 +1586,7 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
                                chain.TipPose(plan.descend.back()).translation())
                                   .norm();
   if (options.on_stage) options.on_stage("at_start");
-  FollowWaypoints(robot, chain, offset(plan.drag), options.waypoint);
+  FollowWaypoints(robot, chain, offset(plan.drag), options.drag);
   if (options.on_stage) options.on_stage("dragged");
   FollowWaypoints(robot, chain, offset(plan.lift), options.waypoint);
   if (options.on_stage) options.on_stage("lifted");

@@ -30,6 +30,37 @@ TEST(MotionTest, MinJerkProfile) {
   EXPECT_NEAR((MinJerk(1) - MinJerk(1 - 1e-4)) / 1e-4, 0.0, 1e-6);
 }
 
+TEST(MotionTest, CruiseProfileMovesAtAnEvenPaceBetweenShortRamps) {
+  // blend 0: minimum jerk.
+  for (const double tau : {0.1, 0.37, 0.8}) EXPECT_DOUBLE_EQ(CruiseProfile(tau, 0.0), MinJerk(tau));
+  const double blend = 0.25;
+  EXPECT_DOUBLE_EQ(CruiseProfile(0.0, blend), 0.0);
+  EXPECT_DOUBLE_EQ(CruiseProfile(1.0, blend), 1.0);
+  EXPECT_DOUBLE_EQ(CruiseProfile(-0.5, blend), 0.0);
+  EXPECT_DOUBLE_EQ(CruiseProfile(1.5, blend), 1.0);
+  EXPECT_NEAR(CruiseProfile(0.5, blend), 0.5, 1e-12);  // symmetric
+  // Constant speed 1 / (1 - blend) between the ramps, continuous where they meet, zero at the ends.
+  const double v = 1.0 / (1.0 - blend);
+  auto speed = [&](double tau) { return (CruiseProfile(tau + 1e-6, blend) - CruiseProfile(tau - 1e-6, blend)) / 2e-6; };
+  for (const double tau : {blend, 0.3, 0.5, 0.7, 1.0 - blend}) EXPECT_NEAR(speed(tau), v, 1e-5) << tau;
+  EXPECT_NEAR((CruiseProfile(1e-4, blend) - CruiseProfile(0, blend)) / 1e-4, 0.0, 1e-3);
+  EXPECT_NEAR((CruiseProfile(1, blend) - CruiseProfile(1 - 1e-4, blend)) / 1e-4, 0.0, 1e-3);
+  // Monotonic, and never faster than the cruise.
+  double previous = 0.0;
+  for (int i = 1; i <= 1000; ++i) {
+    const double s = CruiseProfile(i / 1000.0, blend);
+    EXPECT_GE(s, previous);
+    EXPECT_LE(s - previous, v / 1000.0 + 1e-12);
+    previous = s;
+  }
+  EXPECT_THAT([] { CruiseProfile(0.5, 0.6); }, ThrowsMessage<std::invalid_argument>(HasSubstr("blend")));
+  MotionOptions bad;
+  bad.cruise_blend = 0.7;
+  FakeRobot robot(2);
+  EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("cruise_blend")));
+}
+
 TEST(MotionTest, MoveJointsReachesGoalAndKeepsOthers) {
   FakeRobot robot(2);
   const MotionResult result = MoveJoints(robot, {{"b", 0.5}});
@@ -152,6 +183,18 @@ TEST(MotionTest, MoveThroughPassesEveryGoalWithoutStopping) {
   // One motion of 2 x 0.5 s plus the arrival; stopping at the corner would add its own wait.
   EXPECT_GE(result.elapsed, 1.0 - 1e-9);
   EXPECT_LT(result.elapsed, 1.0 + 0.2);
+
+  // Cruising (MotionOptions::cruise_blend): the corner is passed at the cruise speed
+  // 0.8 rad / 1 s / (1 - 0.25), and the motion takes as long.
+  options.cruise_blend = 0.25;
+  closest_to_corner = 1e9;
+  previous = recorder.ReadEncoders();
+  const double t_cruise = recorder.Time();
+  const MotionResult back = MoveThrough(recorder, {{{"b", 0.0}}, {{"a", 0.0}}}, options);  // back past the corner
+  EXPECT_TRUE(back.reached);
+  EXPECT_NEAR(elapsed_at_corner - t_cruise, 0.5, 0.05);
+  EXPECT_NEAR(speed_at_corner, 0.8 / 0.75, 0.05);
+  EXPECT_LT(back.elapsed, 1.0 + 0.2);
 
   // Nothing to do: no motion, no time.
   const MotionResult none = MoveThrough(robot, {}, options);
