@@ -239,7 +239,9 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   if (out.ball_in_reach && out.put_down) {
     out.ball_grasp_tried = true;
     const Eigen::Vector3d p_ball = ball_R();
-    const control::GraspResult g = control::GraspBall(robot, scene.robot, p_ball, radius, options.ball_grasp);
+    control::BallGraspOptions ball_grasp = options.ball_grasp;
+    ball_grasp.obstacles = WorkspaceObstacles(scene.spec);  // as the episode's ball grasp
+    const control::GraspResult g = control::GraspBall(robot, scene.robot, p_ball, radius, ball_grasp);
     robot.Wait(1.0);  // held for a second more after the skill's own hold
     out.ball_lift_m = ball_R().z() - p_ball.z();
     out.ball_grasped = g.status == control::GraspStatus::kGrasped && out.ball_lift_m >= options.ball_lift_m;

@@ -389,6 +389,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     run_stage("grasp_ball", [&](StageRecord& s) {
       const double z0 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
       control::BallGraspOptions ball_options;
+      ball_options.obstacles = WorkspaceObstacles(spec);
       ball_options.on_stage = [&](const char* stage) { stage_frame(std::string("ball_") + stage); };
       const control::GraspResult g = control::GraspBall(robot, desc, ball.p_RB, ball_radius, ball_options);
       s.ok = g.status == control::GraspStatus::kGrasped;
@@ -396,7 +397,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.reason = g.reason;
       const double z1 = (X_RW * world.ground_truth().Pose(scene.composed.ball_body)).translation().z();
       result.ball_grasp_success = s.ok && z1 - z0 >= 0.03;
-      s.details = {{"ball_lift_m_truth", z1 - z0}};
+      s.details = {{"ball_lift_m_truth", z1 - z0},
+                   {"crossings_blocked", g.paths_blocked},  // joint-space crossings that would hit a fixture
+                   {"last_blocked", g.last_blocked}};
       if (s.ok && !result.ball_grasp_success && result.failure.empty()) {
         // The robot believes it holds the ball (its fingers stopped on something): say why the
         // episode still failed, else result.json showed no failure at all (random episode 10).

@@ -1814,6 +1814,7 @@ void BallGraspOptions::Validate() const {
   if (!(hold_time >= 0)) fail("hold_time", hold_time, ">= 0");
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
   if (!(reach_rescue_max_error_m >= 0)) fail("reach_rescue_max_error_m", reach_rescue_max_error_m, ">= 0");
+  if (!(obstacle_margin_m >= 0)) fail("obstacle_margin_m", obstacle_margin_m, ">= 0");
   transfer.Validate();
   waypoint.Validate();
   ik.Validate();
@@ -1957,8 +1958,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
     return r.converged;
   };
   const Eigen::Isometry3d X_RP_now = chain.TipPose(q_now);
+  const ArmClearance clearance(desc, options.obstacles, desc.hand_open, options.obstacle_margin_m);
+  constexpr double kCheckStepRad = 0.05;
   Eigen::VectorXd q_pre, q_high, q_from = q_now;
-  std::vector<Eigen::VectorXd> rise, down, approach, lift;
+  // cross: the crossing's postures when it goes on a straight palm line (empty: one joint move).
+  std::vector<Eigen::VectorXd> rise, cross, down, approach, lift;
   bool planned = false;
   // Higher when the way there dips; lower at the edge of the workspace, where the pose above the
   // pre-grasp is out of reach (then the pre-grasp itself is the crossing's end).
@@ -1977,6 +1981,26 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
       X_high.translation().z() = std::max(r.X_pre.translation().z(), z_clear);
       const IkResult high = solver.Solve(X_high, r.pre.q);
       if (!Converged(high) || !crossing_clear(q_from, high.q, z_clear - 0.5 * height)) continue;
+      cross.clear();
+      if (const auto hit = clearance.CheckLine(q_from, high.q, kCheckStepRad)) {
+        ++result.paths_blocked;
+        result.last_blocked = Cat(hit->link, " within ", options.obstacle_margin_m, " m of ", hit->obstacle,
+                                  " on the joint-space crossing");
+        // The palm on a straight line instead, each step clear of the fixtures and the ball.
+        Eigen::VectorXd q_line = q_from;
+        Eigen::VectorXd q_last = q_from;
+        auto line_clear = [&](const Eigen::VectorXd& q) {
+          const bool ok = !clearance.CheckLine(q_last, q, kCheckStepRad) &&
+                          crossing_clear(q_last, q, z_clear - 0.5 * height);
+          q_last = q;
+          return ok;
+        };
+        if (!CartesianPath(local, chain.TipPose(q_from), X_high, 0.0, 1.0, 8, 0.3, 2, line_clear, &q_line, &cross) ||
+            JointStep(q_line, high.q) > 0.3) {
+          continue;
+        }
+        cross.push_back(high.q);
+      }
       down = LineWaypoints(solver, X_high, r.X_pre, 3, high.q, 0.3);
       if (down.size() < 3) continue;
       approach = LineWaypoints(solver, r.X_pre, r.X, 4, down.back());
@@ -1999,14 +2023,26 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
     result.status = result.candidates_feasible == 0 ? GraspStatus::kUnreachable : GraspStatus::kIkFailed;
     result.reason = Cat("no complete top/side grasp path to the ball at (", p_RB.transpose(), ") m in R (",
                         result.candidates_feasible, " of ", result.candidates,
-                        " palm poses reachable; none with a crossing that keeps the hand above the ball)");
+                        " palm poses reachable; none with a crossing that keeps the hand above the ball",
+                        result.paths_blocked > 0 ? Cat(" and the arm clear of the fixtures; last: ", result.last_blocked)
+                                                 : std::string(),
+                        ")");
     return result;
   }
   double t0 = robot.Time();
   MotionOptions step = options.waypoint;
   step.timeout = 0.1;
   FollowWaypoints(robot, chain, rise, step);
-  MoveJoints(robot, OpenHandGoal(chain, q_high, desc), options.transfer);
+  if (cross.empty()) {
+    MoveJoints(robot, OpenHandGoal(chain, q_high, desc), options.transfer);
+  } else {
+    std::vector<std::map<std::string, double>> goals;
+    for (const Eigen::VectorXd& q : cross) goals.push_back(OpenHandGoal(chain, q, desc));
+    MotionOptions line = options.transfer;  // the transfer's time, shared by the line's waypoints
+    line.max_speed = 0.0;
+    line.duration = std::max(options.waypoint.duration, options.transfer.duration / static_cast<double>(goals.size()));
+    MoveThrough(robot, goals, line);
+  }
   FollowWaypoints(robot, chain, down, step);
   result.transfer_s = robot.Time() - t0;
   std::string worst;

@@ -151,6 +151,7 @@ TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
   ASSERT_LT((ball_R() - p_RB).norm(), 0.01) << "setting up moved the ball";
 
   control::BallGraspOptions options;
+  options.obstacles = WorkspaceObstacles(scene.spec);  // as in an episode
   Eigen::Vector3d at_pre_grasp = Eigen::Vector3d::Constant(std::nan(""));
   options.on_stage = [&](const char* stage) {
     if (std::string(stage) == "pre_grasp") at_pre_grasp = ball_R();
@@ -160,6 +161,42 @@ TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
   ASSERT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
   EXPECT_LT((at_pre_grasp - p_RB).norm(), 0.01) << "the way to the pre-grasp touched the ball";
   EXPECT_GT(ball_R().z() - z0, 0.03) << "the ball is lifted";
+}
+
+// A fixture between the hand and the ball (a wall, known to the planner only) that every
+// crossing would pass through: the grasp fails in planning, naming it, and nothing moves.
+TEST(BallGraspTest, ACrossingThroughAFixtureIsNotTaken) {
+  SettledScene settled("ball grasp wall");
+  const LoadedScene& scene = settled.scene;
+  sim::World& world = settled.world;
+  sim::SimRobot& robot = settled.robot;
+  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+  const std::string& ball = scene.composed.ball_body;
+  auto ball_R = [&] { return Eigen::Vector3d(X_RW * world.ground_truth().Pose(ball).translation()); };
+  const double radius = scene.spec.ball.radius;
+  Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();
+  X_RB.translation() = Eigen::Vector3d(-0.45, 0.03, ball_R().z());
+  world.TeleportFreeBody(ball, scene.composed.X_WR * X_RB);
+  robot.Wait(0.3);
+  const Eigen::Vector3d p_RB = ball_R();
+  const Eigen::VectorXd before = robot.ReadEncoders();
+  // From the home posture (hand beside the hip, right of the ball) every way to the ball crosses
+  // a wall 10 cm to the ball's right, from the floor to 1 m above the table, 1 m long.
+  control::ObstacleBox wall;
+  wall.name = "wall";
+  wall.X_RB = Eigen::Isometry3d::Identity();
+  wall.X_RB.translation() = Eigen::Vector3d(p_RB.x(), p_RB.y() + 0.10, p_RB.z());
+  wall.half = Eigen::Vector3d(0.5, 0.005, 1.0);
+  control::BallGraspOptions options;
+  options.obstacles = {wall};
+  const control::GraspResult g = control::GraspBall(robot, scene.robot, p_RB, radius, options);
+  EXPECT_EQ(g.status, control::GraspStatus::kIkFailed) << g.reason;
+  EXPECT_GT(g.paths_blocked, 0);
+  EXPECT_THAT(g.reason, HasSubstr("wall"));
+  EXPECT_LT((robot.ReadEncoders() - before).cwiseAbs().maxCoeff(), 0.02) << "nothing moves";
+  options.obstacle_margin_m = -0.01;
+  EXPECT_THAT([&] { control::GraspBall(robot, scene.robot, p_RB, radius, options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("obstacle_margin_m")));
 }
 
 // The edge of the arm's reach along a line out from the robot: a ball 1 cm inside it is in reach
