@@ -245,6 +245,9 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
     robot.Wait(1.0);  // held for a second more after the skill's own hold
     out.ball_lift_m = ball_R().z() - p_ball.z();
     out.ball_grasped = g.status == control::GraspStatus::kGrasped && out.ball_lift_m >= options.ball_lift_m;
+    out.ball_grasp_status = control::ToString(g.status);
+    out.ball_grasp_reason = g.reason;
+    out.ball_crossings_blocked = g.paths_blocked;
     frame("4_ball");
   }
   return finish(reason);
@@ -309,6 +312,9 @@ int RunPullBench(const BenchRequest& request) {
                           {"put_down", r.put_down},
                           {"ball_grasp_tried", r.ball_grasp_tried},
                           {"ball_grasped", r.ball_grasped},
+                          {"ball_grasp_status", r.ball_grasp_status},
+                          {"ball_grasp_reason", r.ball_grasp_reason},
+                          {"ball_crossings_blocked", r.ball_crossings_blocked},
                           {"ball_lift_m", r.ball_lift_m},
                           {"sim_time_s", r.sim_time},
                           {"wall_ms", r.wall_ms}};

@@ -80,6 +80,9 @@ struct PullCaseResult {
   bool put_down = false;             // PutDown placed the tool
   bool ball_grasp_tried = false;
   bool ball_grasped = false;         // ball >= ball_lift_m above its rest height after GraspBall's hold
+  std::string ball_grasp_status;     // GraspBall's status and reason, when tried
+  std::string ball_grasp_reason;
+  int ball_crossings_blocked = 0;    // GraspBall's joint-space crossings that would hit a fixture
   double ball_lift_m = 0.0;
   std::string reason;                // first failed stage, empty when the ball ended in reach
   double sim_time = 0.0;             // [s]
