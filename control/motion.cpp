@@ -12,13 +12,6 @@ double MinJerk(double tau) {
   return s * s * s * (10.0 + s * (-15.0 + 6.0 * s));
 }
 
-Eigen::VectorXd MinJerkPoint(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1, double t,
-                             double T) {
-  if (q0.size() != q1.size()) ThrowInvalid("MinJerkPoint: sizes ", q0.size(), " and ", q1.size());
-  if (!(T > 0)) ThrowInvalid("MinJerkPoint: duration ", T, " must be > 0");
-  return q0 + (q1 - q0) * MinJerk(t / T);
-}
-
 void MotionOptions::Validate() const {
   auto require = [](bool ok, const char* field, double value, const char* expected) {
     if (!ok) ThrowInvalid("MotionOptions: ", field, " = ", value, ", expected ", expected);

@@ -22,9 +22,6 @@ double MinJerk(double tau);
 /// std::invalid_argument for blend > 0.5 or NaN.
 double CruiseProfile(double tau, double blend);
 
-/// Joint positions on the minimum-jerk path from q0 to q1 at time t of a motion lasting T [s].
-Eigen::VectorXd MinJerkPoint(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1, double t,
-                             double T);
 
 /// How a joint motion is executed and judged done.
 struct MotionOptions {
