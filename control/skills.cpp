@@ -121,6 +121,14 @@ double ChainError(const RobotInterface& robot, const KinematicChain& chain, cons
   return max_error;
 }
 
+// `base` for a streamed path of n waypoints that share total_s [s] of motion, each at least
+// min_each_s [s] (not speed-limited: the time is the path's).
+MotionOptions SharedTime(MotionOptions base, double total_s, double min_each_s, size_t n) {
+  base.max_speed = 0.0;
+  base.duration = std::max(min_each_s, total_s / static_cast<double>(std::max<size_t>(1, n)));
+  return base;
+}
+
 // Follows joint-space waypoints with the hand targets untouched, without stopping at each
 // (MoveThrough: motion.duration per waypoint).
 MotionResult FollowWaypoints(RobotInterface& robot, const KinematicChain& chain, const std::vector<Eigen::VectorXd>& path,
@@ -1547,9 +1555,8 @@ PullResult PullObject(RobotInterface& robot, const robot::RobotDescription& desc
   const double t0 = robot.Time();
   // The transfer's waypoints are close together (PullOptions::max_joint_step_rad): each takes a
   // share of the transfer time.
-  MotionOptions step = options.waypoint;
-  step.duration = std::max(options.waypoint.duration,
-                           options.transfer.duration / std::max<size_t>(1, plan.transfer.size()));
+  const MotionOptions step =
+      SharedTime(options.waypoint, options.transfer.duration, options.waypoint.duration, plan.transfer.size());
   FollowWaypoints(robot, chain, plan.transfer, step);
   MoveJoints(robot, ChainGoal(chain, q_above), options.waypoint);
   // The servos sag under the tool's weight: a stick's effector came down 1.5 cm below the plan
@@ -1986,14 +1993,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
         ++result.paths_blocked;
         result.last_blocked = Cat(hit->link, " within ", options.obstacle_margin_m, " m of ", hit->obstacle,
                                   " on the joint-space crossing");
-        // The palm on a straight line instead, each step clear of the fixtures and the ball.
+        // The palm on a straight line instead, each step (from q_line, the path's last posture
+        // when CartesianPath asks) clear of the fixtures and the ball.
         Eigen::VectorXd q_line = q_from;
-        Eigen::VectorXd q_last = q_from;
         auto line_clear = [&](const Eigen::VectorXd& q) {
-          const bool ok = !clearance.CheckLine(q_last, q, kCheckStepRad) &&
-                          crossing_clear(q_last, q, z_clear - 0.5 * height);
-          q_last = q;
-          return ok;
+          return !clearance.CheckLine(q_line, q, kCheckStepRad) && crossing_clear(q_line, q, z_clear - 0.5 * height);
         };
         if (!CartesianPath(local, chain.TipPose(q_from), X_high, 0.0, 1.0, 8, 0.3, 2, line_clear, &q_line, &cross) ||
             JointStep(q_line, high.q) > 0.3) {
@@ -2038,10 +2042,9 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   } else {
     std::vector<std::map<std::string, double>> goals;
     for (const Eigen::VectorXd& q : cross) goals.push_back(OpenHandGoal(chain, q, desc));
-    MotionOptions line = options.transfer;  // the transfer's time, shared by the line's waypoints
-    line.max_speed = 0.0;
-    line.duration = std::max(options.waypoint.duration, options.transfer.duration / static_cast<double>(goals.size()));
-    MoveThrough(robot, goals, line);
+    // The transfer's time, shared by the line's waypoints.
+    MoveThrough(robot, goals,
+                SharedTime(options.transfer, options.transfer.duration, options.waypoint.duration, goals.size()));
   }
   FollowWaypoints(robot, chain, down, step);
   result.transfer_s = robot.Time() - t0;

@@ -34,6 +34,18 @@ struct SettledScene {
     world.SettleFreeBodies(scene.spec.physics.settle_time);
     return world;
   }
+  // The ball's centre in R (ground truth).
+  Eigen::Vector3d BallR() {
+    return scene.composed.X_WR.inverse() * world.ground_truth().Pose(scene.composed.ball_body).translation();
+  }
+  // Puts the ball on the table at (x, y) in R, lets it settle 0.3 s and returns where it rests.
+  Eigen::Vector3d PutBallAt(double x, double y) {
+    Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();
+    X_RB.translation() = Eigen::Vector3d(x, y, BallR().z());
+    world.TeleportFreeBody(scene.composed.ball_body, scene.composed.X_WR * X_RB);
+    robot.Wait(0.3);
+    return BallR();
+  }
   LoadedScene scene;
   sim::World world;
   sim::SimRobot robot;
@@ -117,17 +129,10 @@ INSTANTIATE_TEST_SUITE_P(RakeAndHook, PullFromRackTest, ::testing::Values("rake_
 TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
   SettledScene settled("ball grasp");
   const LoadedScene& scene = settled.scene;
-  sim::World& world = settled.world;
   sim::SimRobot& robot = settled.robot;
-  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
-  const std::string& ball = scene.composed.ball_body;
-  auto ball_R = [&] { return Eigen::Vector3d(X_RW * world.ground_truth().Pose(ball).translation()); };
+  auto ball_R = [&] { return settled.BallR(); };
   const double radius = scene.spec.ball.radius;
-  Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();
-  X_RB.translation() = Eigen::Vector3d(-0.45, 0.03, ball_R().z());
-  world.TeleportFreeBody(ball, scene.composed.X_WR * X_RB);
-  robot.Wait(0.3);
-  const Eigen::Vector3d p_RB = ball_R();
+  const Eigen::Vector3d p_RB = settled.PutBallAt(-0.45, 0.03);
   ASSERT_TRUE(control::BallInReach(scene.robot, scene.robot.HomeQ(), p_RB, radius));
 
   // The open hand palm-down 4 cm above the table, 15 cm to the right of the ball and 3 cm nearer.
@@ -168,17 +173,9 @@ TEST(BallGraspTest, HandLowBesideTheBallCrossesAboveItAndLiftsIt) {
 TEST(BallGraspTest, ACrossingThroughAFixtureIsNotTaken) {
   SettledScene settled("ball grasp wall");
   const LoadedScene& scene = settled.scene;
-  sim::World& world = settled.world;
   sim::SimRobot& robot = settled.robot;
-  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
-  const std::string& ball = scene.composed.ball_body;
-  auto ball_R = [&] { return Eigen::Vector3d(X_RW * world.ground_truth().Pose(ball).translation()); };
   const double radius = scene.spec.ball.radius;
-  Eigen::Isometry3d X_RB = Eigen::Isometry3d::Identity();
-  X_RB.translation() = Eigen::Vector3d(-0.45, 0.03, ball_R().z());
-  world.TeleportFreeBody(ball, scene.composed.X_WR * X_RB);
-  robot.Wait(0.3);
-  const Eigen::Vector3d p_RB = ball_R();
+  const Eigen::Vector3d p_RB = settled.PutBallAt(-0.45, 0.03);
   const Eigen::VectorXd before = robot.ReadEncoders();
   // From the home posture (hand beside the hip, right of the ball) every way to the ball crosses
   // a wall 10 cm to the ball's right, from the floor to 1 m above the table, 1 m long.
