@@ -177,7 +177,7 @@ void GraspOptions::Validate() const {
   if (!(lift_max_m >= 0)) fail("lift_max_m", lift_max_m, ">= 0");
   if (!(lift_step_m > 0)) fail("lift_step_m", lift_step_m, "> 0");
   if (path_restarts < 0) fail("path_restarts", path_restarts, ">= 0");
-  if (path_ipopt_iterations < 1) fail("path_ipopt_iterations", path_ipopt_iterations, "> 0");
+  if (path_ipopt_iterations < 0) fail("path_ipopt_iterations", path_ipopt_iterations, ">= 0");
   if (!(fallback_max_error_m >= 0)) fail("fallback_max_error_m", fallback_max_error_m, ">= 0");
   if (!(touching_depth_step_m > 0)) fail("touching_depth_step_m", touching_depth_step_m, "> 0");
   if (!(preshape_time > 0)) fail("preshape_time", preshape_time, "> 0");
@@ -188,7 +188,7 @@ void GraspOptions::Validate() const {
   if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
   if (screening_ipopt_iterations < 0) fail("screening_ipopt_iterations", screening_ipopt_iterations, ">= 0");
   if (fallback_restarts < 0) fail("fallback_restarts", fallback_restarts, ">= 0");
-  if (fallback_ipopt_iterations < 1) fail("fallback_ipopt_iterations", fallback_ipopt_iterations, "> 0");
+  if (fallback_ipopt_iterations < 0) fail("fallback_ipopt_iterations", fallback_ipopt_iterations, ">= 0");
   if (!(fallback_min_approach_cos >= -1 && fallback_min_approach_cos <= 1)) {
     fail("fallback_min_approach_cos", fallback_min_approach_cos, "in [-1, 1]");
   }
@@ -343,9 +343,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // Path waypoints are warm-started from their neighbour on the path: a restart from elsewhere
   // would land in another IK branch (a jump, not a straight line), so few restarts and a short
   // Ipopt run make a failing waypoint cheap.
-  IkOptions path_options = options.ik;
-  path_options.presolve_restarts = options.path_restarts;
-  path_options.max_iterations = options.path_ipopt_iterations;
+  const IkOptions path_options = ScreeningIk(options.ik, options.path_restarts, options.path_ipopt_iterations);
   CartesianSolver solver(chain, desc.HomeQ(), path_options);
   const std::vector<std::string> names = robot.JointNames();
   for (const auto* hand : {&desc.hand_open, &desc.hand_preshape, &desc.hand_closed}) {
@@ -511,9 +509,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // cost first. Nothing moves before a plan is complete.
   const IkOptions screen_options =
       ScreeningIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
-  IkOptions fallback_options = options.ik;
-  fallback_options.presolve_restarts = options.fallback_restarts;
-  fallback_options.max_iterations = options.fallback_ipopt_iterations;
+  const IkOptions fallback_options =
+      ScreeningIk(options.ik, options.fallback_restarts, options.fallback_ipopt_iterations);
   double best_error = std::numeric_limits<double>::infinity();
   const int steps = std::max(1, static_cast<int>(std::round(2 * M_PI / options.roll_step_rad)));
   std::vector<double> slides{0.0};
@@ -1821,6 +1818,7 @@ void BallGraspOptions::Validate() const {
   if (!(hold_time >= 0)) fail("hold_time", hold_time, ">= 0");
   if (!(empty_hand_tol > 0)) fail("empty_hand_tol", empty_hand_tol, "> 0");
   if (!(reach_rescue_max_error_m >= 0)) fail("reach_rescue_max_error_m", reach_rescue_max_error_m, ">= 0");
+  if (grasp_ipopt_iterations < 0) fail("grasp_ipopt_iterations", grasp_ipopt_iterations, ">= 0");
   if (!(obstacle_margin_m >= 0)) fail("obstacle_margin_m", obstacle_margin_m, ">= 0");
   transfer.Validate();
   waypoint.Validate();
@@ -1907,10 +1905,11 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   RequireHandJoints(robot, desc, "GraspBall");
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
-  CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  const IkOptions grasp_ik = ScreeningIk(options.ik, options.ik.presolve_restarts, options.grasp_ipopt_iterations);
+  CartesianSolver solver(chain, desc.HomeQ(), grasp_ik);
   // Short moves from where the hand is: no steps toward the rest posture, which jump IK branches
   // (0.76 rad for a 3 cm rise from a put-down posture).
-  IkOptions local_options = options.ik;
+  IkOptions local_options = grasp_ik;
   local_options.rest_iterations = 0;
   CartesianSolver local(chain, desc.HomeQ(), local_options);
   const Eigen::VectorXd q_now = ModelQFrom(desc, robot.JointNames(), robot.ReadEncoders());

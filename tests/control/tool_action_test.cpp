@@ -202,6 +202,25 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_edge_margin_m")));
 }
 
+TEST(SkillOptionsTest, IpoptRescuesMayBeTurnedOff) {
+  // 0 = no Ipopt after a failed pre-solve (the defaults of the grasp's fallback pass and of the
+  // ball grasp); a negative count is refused, naming the field.
+  GraspOptions grasp;
+  EXPECT_EQ(grasp.fallback_ipopt_iterations, 0);
+  grasp.path_ipopt_iterations = 0;
+  EXPECT_NO_THROW(grasp.Validate());
+  grasp.fallback_ipopt_iterations = -1;
+  EXPECT_THAT([&] { grasp.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("fallback_ipopt_iterations")));
+  grasp.fallback_ipopt_iterations = 0;
+  grasp.path_ipopt_iterations = -1;
+  EXPECT_THAT([&] { grasp.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("path_ipopt_iterations")));
+  BallGraspOptions ball;
+  EXPECT_EQ(ball.grasp_ipopt_iterations, 0);
+  EXPECT_NO_THROW(ball.Validate());
+  ball.grasp_ipopt_iterations = -1;
+  EXPECT_THAT([&] { ball.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("grasp_ipopt_iterations")));
+}
+
 TEST(HandleTowardEffectorTest, TurnsTheHandleAxisTowardTheEffector) {
   Eigen::Isometry3d X_RH = Eigen::Isometry3d::Identity();
   X_RH.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
