@@ -51,6 +51,9 @@ int RunBench(const BenchRequest& request) {
   if (request.hindsight && request.protocol != "random") {
     ThrowInvalid("bench: --hindsight applies to protocol random only, not '", request.protocol, "'");
   }
+  if (!request.check_action_before_grasp && request.protocol != "random") {
+    ThrowInvalid("bench: --no-action-check applies to protocol random only, not '", request.protocol, "'");
+  }
   if (request.from_rack_look && request.protocol != "grasp-gt") {
     ThrowInvalid("bench: --from-rack-look applies to protocol grasp-gt only, not '", request.protocol, "'");
   }

@@ -38,6 +38,7 @@ struct BenchRequest {
   /// and score the episode's choice against the best of them (truth.choice_correct).
   bool hindsight = false;
   bool best_tool_only = false;    // random: EpisodeRequest::best_tool_only (table53 scenes hold one tool)
+  bool check_action_before_grasp = true;  // random: EpisodeRequest::check_action_before_grasp
   bool from_rack_look = false;    // grasp-gt: GraspCaseOptions::from_rack_look
 };
 

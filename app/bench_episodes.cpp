@@ -101,6 +101,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     episode.scene = BenchScene(request, c.params["scene_seed"].get<std::uint64_t>());
     episode.quiet = true;
     episode.best_tool_only = request.best_tool_only;
+    episode.check_action_before_grasp = request.check_action_before_grasp;
     episode.frames = request.frames;
     episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
     nlohmann::json result = EpisodeJson(RunEpisode(episode));
@@ -114,6 +115,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   info["episodes"] = episodes;
   info["hindsight"] = request.hindsight;
   info["best_tool_only"] = request.best_tool_only;
+  info["check_action_before_grasp"] = request.check_action_before_grasp;
   ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case));
   return 0;
 }

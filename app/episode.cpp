@@ -9,6 +9,7 @@
 #include <limits>
 #include <optional>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #include <fmt/format.h>
@@ -607,6 +608,35 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                          {"reason", g.reason},
                          {"neighbour_contact_allowed", neighbour_contact_allowed}});
       };
+      // The robot's own grip may leave no way to act: the effector cannot be put behind the ball
+      // from it (held too near the effector, or on the hand's wrong side). Nothing has moved
+      // then, but the tool has been taken off the rack, and the robot asks for it to be put in
+      // its hand again (a re-grip, assisted): 14 of 100 random episodes, seeds 1 and 2, with
+      // session 21's code, 11 of them with other tools on the rack. So, with others to try, each
+      // planned grasp is checked by planning the action from it before anything moves; once one
+      // grasp of a tool is refused, its other grasps are refused at once (one plan of the action
+      // costs ~0.3 s, ~2 s when it fails). The first refused tool is grasped as before when no
+      // other passes.
+      std::set<int> action_refused;  // segments one of whose planned grasps left no plan of the action
+      int refused = -1;              // the first of them
+      int action_checks = 0;
+      double action_check_ms = 0.0;
+      if (others_to_try && request.check_action_before_grasp) {
+        grasp_options.accept_plan = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
+          const int segment = result.chosen_segment;
+          if (action_refused.count(segment) > 0) return "another planned grasp of this tool was refused";
+          const auto check_start = Clock::now();
+          const control::PullPlan plan = control::PlanPull(desc, q_lifted, X_RP.inverse() * tool->X_RT,
+                                                           EffectorOf(*model), ball.p_RB, ball_radius, pull_options);
+          ++action_checks;
+          action_check_ms += Ms(check_start);
+          if (plan.complete()) return "";
+          action_refused.insert(segment);
+          if (refused < 0) refused = segment;
+          return Cat("held that way, no ", control::ToString(pull_options.action), " could be planned (",
+                     control::ToString(plan.result.status), ": ", plan.result.reason, ")");
+        };
+      }
       int neighbour_blocked = -1;  // the first tool that only a touching grasp would take
       for (size_t k = 0; k < ranking.size(); ++k) {
         if (k > 0 && request.best_tool_only) break;
@@ -617,6 +647,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
           neighbour_blocked = ranking[k];
         }
       }
+      grasp_options.accept_plan = nullptr;
+      if (control::PlanningFailed(g.status) && refused >= 0) try_tool(refused, !others_to_try);
       if (control::PlanningFailed(g.status) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
       if (control::PlanningFailed(g.status)) {
         // No tool within reach: the hand-over brings the first choice.
@@ -663,6 +695,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"regrasps", g.regrasps},
                    {"regrasp_reason", g.regrasp_reason},
                    {"plan_ms", plan_ms},
+                   {"action_checks", action_checks},
+                   {"action_check_ms", action_check_ms},
+                   {"action_refused", refused >= 0 ? analysis.tools[static_cast<size_t>(refused)].model : ""},
                    {"robot_s", {{"transfer", g.transfer_s},
                                 {"approach", g.approach_s},
                                 {"close", g.close_s},

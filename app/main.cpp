@@ -145,6 +145,10 @@ int main(int argc, char** argv) {
                     "Ask for a hand-over of the best-predicted tool when its handle is out of reach (thesis Alg. 6) "
                     "instead of grasping the next best tool within reach");
   episode->add_flag(
+      "--no-action-check", [&](std::int64_t) { episode_request.check_action_before_grasp = false; },
+      "Grasp the chosen tool without first planning the action from the planned grasp (with other tools on the "
+      "rack, a tool whose grasp leaves no action plan is otherwise passed over for the next one)");
+  episode->add_flag(
       "--no-noise", [&](std::int64_t) { episode_request.noise = false; },
       "Ideal images: switch the sensor noise model off");
 
@@ -282,6 +286,9 @@ int main(int argc, char** argv) {
     bench->add_flag("--best-tool-only", bench_request.best_tool_only,
                     "random: episodes ask for a hand-over of the best-predicted tool when its "
                     "handle is out of reach instead of grasping the next best tool within reach");
+    bench->add_flag(
+        "--no-action-check", [&](std::int64_t) { bench_request.check_action_before_grasp = false; },
+        "random: episodes grasp the chosen tool without first planning the action from the planned grasp");
     bench->add_flag("--from-rack-look", bench_request.from_rack_look,
                     "grasp-gt: grasp as the episode does, after the look at the rack (torso turned, hand "
                     "hanging beside the hip) instead of from the home posture");

@@ -209,12 +209,13 @@ const char* ToString(GraspStatus status) {
     case GraspStatus::kMotionTimeout: return "motion_timeout";
     case GraspStatus::kEmptyHand: return "empty_hand";
     case GraspStatus::kDropped: return "dropped";
+    case GraspStatus::kRejected: return "rejected";
   }
   return "unknown";
 }
 
 bool PlanningFailed(GraspStatus status) {
-  return status == GraspStatus::kUnreachable || status == GraspStatus::kIkFailed;
+  return status == GraspStatus::kUnreachable || status == GraspStatus::kIkFailed || status == GraspStatus::kRejected;
 }
 
 namespace {
@@ -655,6 +656,14 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   result.axis_flipped = plan.flipped;
   result.slide_m = plan.slide;
   result.rest_cost = plan.rest_cost;
+  if (options.accept_plan) {
+    const std::string refused = options.accept_plan(plan.X_RP, plan.lift.empty() ? plan.q_grasp : plan.lift.back());
+    if (!refused.empty()) {
+      result.status = GraspStatus::kRejected;
+      result.reason = Cat("the planned grasp was refused: ", refused);
+      return result;
+    }
+  }
 
   // 1. Open hand, arm to the pre-grasp.
   double t0 = robot.Time();

@@ -158,6 +158,13 @@ struct GraspOptions {
   /// (joint-space transfer done), "at_grasp" (approach done, hand open), "closed", "lifted".
   /// For observers (e.g. the bench writing a picture per stage); must not move the robot.
   std::function<void(const char* stage)> on_stage;
+  /// Asked, when set, about the complete path GraspHandle chose, before anything moves: the palm
+  /// pose at the grasp X_RP (in R) and the posture at the end of the lift (model q). An empty
+  /// answer accepts it; any other is the reason it is refused, and GraspHandle then returns
+  /// kRejected with that reason, the robot unmoved (GraspToolForAction goes on to its next way
+  /// of grasping). For a caller that can tell whether the tool, held that way, can do its job
+  /// (the episode: whether the pull can be planned). Must not move the robot.
+  std::function<std::string(const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted)> accept_plan;
   void Validate() const;  // throws std::invalid_argument naming the field and its value
 };
 
@@ -171,12 +178,13 @@ enum class GraspStatus {
   kMotionTimeout,  // the arm did not arrive at the pre-grasp in time
   kEmptyHand,      // the fingers closed all the way: nothing between them
   kDropped,        // the fingers closed on the handle, then all the way during the lift: it slipped out
+  kRejected,       // a complete path was planned, but GraspOptions::accept_plan refused it (nothing moved)
 };
 
 /// Human-readable name of a status ("grasped", "unreachable", ...).
 const char* ToString(GraspStatus status);
 
-/// Whether a grasp failed in planning, before anything moved (kUnreachable or kIkFailed).
+/// Whether a grasp failed in planning, before anything moved (kUnreachable, kIkFailed or kRejected).
 bool PlanningFailed(GraspStatus status);
 
 /// Outcome of GraspHandle.

@@ -275,6 +275,9 @@ TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   request.hindsight = true;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--hindsight")));
   request.hindsight = false;
+  request.check_action_before_grasp = false;
+  EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--no-action-check")));
+  request.check_action_before_grasp = true;
   request.protocol = "random";
   request.from_rack_look = true;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--from-rack-look")));

@@ -35,7 +35,9 @@ TEST(ToolActionTest, NamesRoundTrip) {
 TEST(ToolActionTest, PlanningFailuresAreTheOnesBeforeAnythingMoved) {
   using control::GraspStatus;
   using control::PullStatus;
-  for (GraspStatus s : {GraspStatus::kUnreachable, GraspStatus::kIkFailed}) EXPECT_TRUE(control::PlanningFailed(s));
+  for (GraspStatus s : {GraspStatus::kUnreachable, GraspStatus::kIkFailed, GraspStatus::kRejected}) {
+    EXPECT_TRUE(control::PlanningFailed(s));
+  }
   for (GraspStatus s : {GraspStatus::kGrasped, GraspStatus::kMotionTimeout, GraspStatus::kEmptyHand,
                         GraspStatus::kDropped}) {
     EXPECT_FALSE(control::PlanningFailed(s)) << control::ToString(s);

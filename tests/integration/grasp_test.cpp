@@ -206,6 +206,57 @@ TEST(GraspHandle, PlansGraspsTouchingANeighbourLastOrNotAtAll) {
   ExpectGraspedLiftedAndHeld(touching);
 }
 
+// A caller may refuse the planned grasp before anything moves (GraspOptions::accept_plan: the
+// episode refuses a grasp from which the action cannot be planned): GraspHandle then reports
+// kRejected with the caller's reason and the arm has not moved; GraspToolForAction goes on to
+// its next way of grasping the handle and grasps with the first one accepted.
+TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
+  SceneRequest request;
+  request.tools = {"stick_2"};
+  request.cells = {"pos2"};
+  const LoadedScene scene = LoadScene(request);
+  const sim::PlacedTool& placed = scene.composed.tools.at(0);
+  const toollib::ToolModel* model = nullptr;
+  for (const auto& t : scene.library) {
+    if (t.name == placed.name) model = &t;
+  }
+  ASSERT_NE(model, nullptr);
+  sim::World world(scene.composed.mjcf, "accept test");
+  world.SettleFreeBodies(scene.spec.physics.settle_time);
+  sim::SimRobot robot(world);
+  const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+  const Eigen::Isometry3d X_RT = X_RW * world.ground_truth().Pose(placed.body);
+  const Eigen::Isometry3d X_RH = X_RT * HandleFrame(model->handle);
+  const Eigen::VectorXd before = robot.PositionTargets();
+  std::vector<Eigen::Isometry3d> asked;
+  control::GraspOptions options;  // as grasp-gt grasps
+  options.handle_slide_m = FreeHandleSlide(scene.robot, model->handle.length);
+  options.obstacles = WorkspaceObstacles(scene.spec);
+  options.accept_plan = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
+    EXPECT_EQ(q_lifted.size(), scene.robot.HomeQ().size());
+    asked.push_back(X_RP);
+    return asked.size() < 3 ? "too short for the job" : "";
+  };
+  const control::GraspResult refused = control::GraspHandle(robot, scene.robot, X_RH, options);
+  EXPECT_EQ(refused.status, control::GraspStatus::kRejected);
+  EXPECT_TRUE(control::PlanningFailed(refused.status));
+  EXPECT_THAT(refused.reason, ::testing::HasSubstr("too short for the job"));
+  ASSERT_EQ(asked.size(), 1u);
+  EXPECT_TRUE(asked[0].isApprox(refused.X_RP_grasp, 1e-12));
+  EXPECT_EQ(robot.PositionTargets(), before);
+
+  asked.clear();
+  const Eigen::Vector3d p_R_effector = X_RT * model->effector.center;
+  const control::GraspResult g = control::GraspToolForAction(robot, scene.robot, X_RH, p_R_effector,
+                                                             FreeHandleSlide(scene.robot, model->handle.length), options);
+  EXPECT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
+  ASSERT_EQ(asked.size(), 3u);
+  EXPECT_TRUE(asked[2].isApprox(g.X_RP_grasp, 1e-12));
+  EXPECT_FALSE(asked[0].isApprox(asked[2], 1e-6));  // another way of holding it
+  const double lift = (X_RW * world.ground_truth().Pose(placed.body)).translation().z() - X_RT.translation().z();
+  EXPECT_GE(lift, kMinLiftM);
+}
+
 TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
   SceneRequest request;
   request.tools = {"stick_2"};
