@@ -28,6 +28,14 @@ void ExpectGraspedLiftedAndHeld(const GraspCaseResult& r) {
   EXPECT_TRUE(r.success) << r.reason;
 }
 
+// The library model named `name` in the scene's library, or nullptr.
+const toollib::ToolModel* LibraryModel(const LoadedScene& scene, const std::string& name) {
+  for (const auto& t : scene.library) {
+    if (t.name == name) return &t;
+  }
+  return nullptr;
+}
+
 class GraspTest : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(GraspTest, GraspsLiftsAndHoldsFromGroundTruthHandle) {
@@ -63,10 +71,7 @@ TEST(GraspHandle, RoutesTheTransferOverTheRacksLedge) {
   request.cells = {"pos1"};
   const LoadedScene scene = LoadScene(request);
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
-  const toollib::ToolModel* model = nullptr;
-  for (const auto& t : scene.library) {
-    if (t.name == placed.name) model = &t;
-  }
+  const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
   const std::vector<control::ObstacleBox> obstacles = WorkspaceObstacles(scene.spec);
   const control::ArmClearance clearance(scene.robot, obstacles, scene.robot.hand_open, 0.0);
@@ -216,10 +221,7 @@ TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
   request.cells = {"pos2"};
   const LoadedScene scene = LoadScene(request);
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
-  const toollib::ToolModel* model = nullptr;
-  for (const auto& t : scene.library) {
-    if (t.name == placed.name) model = &t;
-  }
+  const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
   sim::World world(scene.composed.mjcf, "accept test");
   world.SettleFreeBodies(scene.spec.physics.settle_time);
