@@ -9,8 +9,8 @@
 #include <limits>
 #include <optional>
 #include <memory>
-#include <set>
 #include <sstream>
+#include <vector>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -617,22 +617,22 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // grasp of a tool is refused, its other grasps are refused at once (one plan of the action
       // costs ~0.3 s, ~2 s when it fails). The first refused tool is grasped as before when no
       // other passes.
-      std::set<int> action_refused;  // segments one of whose planned grasps left no plan of the action
-      int refused = -1;              // the first of them
+      std::vector<int> refused;  // segments one of whose planned grasps left no plan of the action, in turn
       int action_checks = 0;
       double action_check_ms = 0.0;
       if (others_to_try && request.check_action_before_grasp) {
         grasp_options.accept_plan = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
           const int segment = result.chosen_segment;
-          if (action_refused.count(segment) > 0) return "another planned grasp of this tool was refused";
+          if (std::find(refused.begin(), refused.end(), segment) != refused.end()) {
+            return "another planned grasp of this tool was refused";
+          }
           const auto check_start = Clock::now();
           const control::PullPlan plan = control::PlanPull(desc, q_lifted, X_RP.inverse() * tool->X_RT,
                                                            EffectorOf(*model), ball.p_RB, ball_radius, pull_options);
           ++action_checks;
           action_check_ms += Ms(check_start);
           if (plan.complete()) return "";
-          action_refused.insert(segment);
-          if (refused < 0) refused = segment;
+          refused.push_back(segment);
           return Cat("held that way, no ", control::ToString(pull_options.action), " could be planned (",
                      control::ToString(plan.result.status), ": ", plan.result.reason, ")");
         };
@@ -648,7 +648,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         }
       }
       grasp_options.accept_plan = nullptr;
-      if (control::PlanningFailed(g.status) && refused >= 0) try_tool(refused, !others_to_try);
+      if (control::PlanningFailed(g.status) && !refused.empty()) try_tool(refused.front(), !others_to_try);
       if (control::PlanningFailed(g.status) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
       if (control::PlanningFailed(g.status)) {
         // No tool within reach: the hand-over brings the first choice.
@@ -697,7 +697,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"plan_ms", plan_ms},
                    {"action_checks", action_checks},
                    {"action_check_ms", action_check_ms},
-                   {"action_refused", refused >= 0 ? analysis.tools[static_cast<size_t>(refused)].model : ""},
+                   {"action_refused", refused.empty() ? "" : analysis.tools[static_cast<size_t>(refused.front())].model},
                    {"robot_s", {{"transfer", g.transfer_s},
                                 {"approach", g.approach_s},
                                 {"close", g.close_s},

@@ -33,9 +33,9 @@ struct EpisodeRequest {
   /// Ask for a hand-over of the best-predicted tool when its handle is out of reach (the thesis's
   /// Algorithm 6), instead of grasping the next best tool that is within reach.
   bool best_tool_only = false;
-  /// With more than one tool to choose from: each tool's first planned grasp is checked before
-  /// anything moves by planning the action from it (the tool where the grasp plan puts it in the
-  /// hand, the arm where the lift ends); a tool whose grasp leaves no action plan is passed over
+  /// With more than one tool to choose from: each planned tool grasp is checked before anything
+  /// moves by planning the action from it (the tool where the grasp plan puts it in the hand,
+  /// the arm where the lift ends); a tool with a grasp that leaves no action plan is passed over
   /// for the next in the ranking, and grasped as before only when no other tool passes (the
   /// robot then asks for it again, the re-grip). false: no check (the code before session 22).
   bool check_action_before_grasp = true;

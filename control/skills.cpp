@@ -239,9 +239,10 @@ std::optional<ClearanceHit> HandClosestAtGrasp(const ArmClearance& open, const A
   return closest;
 }
 
-// The IK options of a cheap screening of many candidate poses (most out of reach): `restarts`
-// pre-solve restarts, and `ipopt_iterations` of Ipopt after a failed pre-solve (0: no Ipopt).
-IkOptions ScreeningIk(const IkOptions& base, int restarts, int ipopt_iterations) {
+// `base` with `restarts` pre-solve restarts and `ipopt_iterations` of Ipopt after a failed
+// pre-solve (0: no Ipopt): a cheap screening of many candidate poses (most out of reach), a path
+// waypoint warm-started from its neighbour, or a solve whose Ipopt rescue never pays.
+IkOptions LimitedIk(const IkOptions& base, int restarts, int ipopt_iterations) {
   IkOptions o = base;
   o.presolve_restarts = restarts;
   o.max_iterations = std::max(1, ipopt_iterations);
@@ -344,7 +345,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // Path waypoints are warm-started from their neighbour on the path: a restart from elsewhere
   // would land in another IK branch (a jump, not a straight line), so few restarts and a short
   // Ipopt run make a failing waypoint cheap.
-  const IkOptions path_options = ScreeningIk(options.ik, options.path_restarts, options.path_ipopt_iterations);
+  const IkOptions path_options = LimitedIk(options.ik, options.path_restarts, options.path_ipopt_iterations);
   CartesianSolver solver(chain, desc.HomeQ(), path_options);
   const std::vector<std::string> names = robot.JointNames();
   for (const auto* hand : {&desc.hand_open, &desc.hand_preshape, &desc.hand_closed}) {
@@ -509,9 +510,9 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // nearest the handle centre first and the first offset with a complete path wins, lowest rest
   // cost first. Nothing moves before a plan is complete.
   const IkOptions screen_options =
-      ScreeningIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
+      LimitedIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
   const IkOptions fallback_options =
-      ScreeningIk(options.ik, options.fallback_restarts, options.fallback_ipopt_iterations);
+      LimitedIk(options.ik, options.fallback_restarts, options.fallback_ipopt_iterations);
   double best_error = std::numeric_limits<double>::infinity();
   const int steps = std::max(1, static_cast<int>(std::round(2 * M_PI / options.roll_step_rad)));
   std::vector<double> slides{0.0};
@@ -1103,7 +1104,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
   const IkOptions screen_options =
-      ScreeningIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
+      LimitedIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
   CartesianSolver screen(chain, desc.HomeQ(), screen_options);
   IkOptions loose_options = screen_options;
   loose_options.position_tolerance_m = std::max(options.ik.position_tolerance_m, options.start_tolerance_m);
@@ -1914,7 +1915,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
   RequireHandJoints(robot, desc, "GraspBall");
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
-  const IkOptions grasp_ik = ScreeningIk(options.ik, options.ik.presolve_restarts, options.grasp_ipopt_iterations);
+  const IkOptions grasp_ik = LimitedIk(options.ik, options.ik.presolve_restarts, options.grasp_ipopt_iterations);
   CartesianSolver solver(chain, desc.HomeQ(), grasp_ik);
   // Short moves from where the hand is: no steps toward the rest posture, which jump IK branches
   // (0.76 rad for a 3 cm rise from a put-down posture).
