@@ -33,10 +33,10 @@ Capture CaptureFrame(const SceneRequest& request, const CaptureOptions& options,
   render_options.camera = options.camera;
   sim::Renderer renderer(gl, world, render_options);
   capture.frame = renderer.Render(world, DeriveSeed(request.seed, "sensor_noise"));
-  // The helmet camera's pose comes from encoder forward kinematics, as on the robot; the
-  // overview camera is fixed in the world with calibrated extrinsics.
+  // The helmet camera's pose comes from encoder forward kinematics, as on the robot; the other
+  // cameras are fixed in the world with calibrated extrinsics.
   capture.frame.X_RC = options.camera == "helmet" ? CameraPoseFromEncoders(capture.scene.robot, robot)
-                                                  : capture.scene.composed.X_RO;
+                                                  : capture.scene.composed.X_R_fixed_cameras.at(options.camera);
   const sim::GroundTruth now = world.ground_truth();
   for (const auto& placed : capture.scene.composed.tools) {
     capture.tool_drift_m = std::max(capture.tool_drift_m, (now.Pose(placed.body).translation() -

@@ -17,7 +17,7 @@ namespace toolbench::app {
 struct CaptureOptions {
   bool noise = true;              // sensor noise model on
   bool look_at_table = false;     // look at the table instead of the rack
-  std::string camera = "helmet";  // "helmet" (the robot's sensor) or "overview"
+  std::string camera = "helmet";  // "helmet" (the robot's sensor) or a fixed camera: "overview", "side", "rack_close"
 };
 
 /// A scene after settling and turning to look, with one frame from the chosen camera.

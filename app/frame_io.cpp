@@ -113,7 +113,9 @@ void WriteFrame(const std::filesystem::path& dir, const RgbdFrame& frame,
                           {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy},
                           {"convention", "pixel-index; OpenCV camera frame x right, y down, z forward"}};
   camera["X_RC"] = PoseJson(frame.X_RC);
-  camera["X_RC"]["source"] = "forward kinematics of the joint encoders";
+  camera["X_RC"]["source"] = extra.value("camera", std::string("helmet")) == "helmet"
+                                 ? "forward kinematics of the joint encoders"
+                                 : "calibrated extrinsics of a camera fixed in the world";
   camera["depth_png"] = "uint16 millimetres along the optical axis, 0 = no return";
   WriteTextFile(dir / "camera.json", camera.dump(2) + "\n");
   Eigen::Matrix3Xf points;

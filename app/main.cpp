@@ -138,7 +138,7 @@ int main(int argc, char** argv) {
   episode->add_option("--out", episode_request.out_dir, "Output folder (default: runs/episode-seed<N>)");
   episode->add_flag("--video", episode_request.video, "Write video.mp4 from the overview camera (slower)");
   episode->add_flag("--frames", episode_request.frames,
-                    "Write overview and side-view PNGs after each stage of the tool grasp and the action to "
+                    "Write overview, side-view and rack close-up PNGs after each stage of the tool grasp and the action to "
                     "--out/frames (debugging)");
   episode->add_flag("--quiet", episode_request.quiet, "No progress lines and no summary (for scripts)");
   episode->add_flag("--best-tool-only", episode_request.best_tool_only,
@@ -171,8 +171,9 @@ int main(int argc, char** argv) {
   render
       ->add_option("--camera", camera,
                    "helmet (the robot's RGB-D sensor) or overview (a fixed third-person view "
-                   "for looking at the scene) or side (from the robot's left, across the table)")
-      ->check(CLI::IsMember({"helmet", "overview", "side"}))
+                   "for looking at the scene) or side (from the robot's left, across the table) or rack_close "
+                   "(a close-up of the rack, along its ledge)")
+      ->check(CLI::IsMember({"helmet", "overview", "side", "rack_close"}))
       ->capture_default_str();
 
   app::SceneRequest perceive_request;

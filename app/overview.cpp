@@ -13,7 +13,7 @@ namespace toolbench::app {
 void WriteOverviewPng(sim::World& world, const std::filesystem::path& png) {
   sim::GlContext gl;
   std::vector<cv::Mat> views;
-  for (const char* camera : {"overview", "side"}) {
+  for (const char* camera : {"overview", "side", "rack_close"}) {
     sim::RendererOptions options;
     options.camera = camera;
     options.noise.enabled = false;

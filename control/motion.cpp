@@ -27,6 +27,9 @@ void MotionOptions::Validate() const {
 }
 
 double MotionOptions::TrajectoryTime(double span, double fixed) const {
+  // Nowhere to go (IK solutions of one pose from nearby postures differ by ~1e-5 rad): only the
+  // wait for arrival.
+  if (!(span > kNegligibleSpanRad)) return 0.0;
   if (max_speed <= 0) return fixed;
   constexpr double kMinJerkPeak = 1.875;  // max of dMinJerk/dtau, at tau = 1/2
   const double peak = cruise_blend > 0 ? 1.0 / (1.0 - cruise_blend) : kMinJerkPeak;

@@ -22,6 +22,9 @@ double MinJerk(double tau);
 /// std::invalid_argument for blend > 0.5 or NaN.
 double CruiseProfile(double tau, double blend);
 
+/// A motion whose largest joint change is at most this [rad] has no trajectory
+/// (MotionOptions::TrajectoryTime).
+inline constexpr double kNegligibleSpanRad = 1e-3;
 
 /// How a joint motion is executed and judged done.
 struct MotionOptions {
@@ -41,7 +44,10 @@ struct MotionOptions {
   double cruise_blend = 0.0;
   /// The trajectory time [s] of a motion whose largest joint change (MoveThrough: joint-space
   /// path length, segments by their largest joint change) is `span` [rad], >= 0, and whose fixed
-  /// time would be `fixed` [s].
+  /// time would be `fixed` [s]. 0 for a span up to kNegligibleSpanRad: a motion to where the
+  /// targets already are only waits for the encoders' arrival (such no-op moves, e.g. a straight
+  /// line down from a pose that is already high enough, took their full fixed time: 1.5 s of an
+  /// episode's ~42 s of robot time).
   double TrajectoryTime(double span, double fixed) const;
   void Validate() const;        // throws std::invalid_argument naming the field
 };

@@ -1832,6 +1832,7 @@ void BallGraspOptions::Validate() const {
   if (!(obstacle_margin_m >= 0)) fail("obstacle_margin_m", obstacle_margin_m, ">= 0");
   transfer.Validate();
   waypoint.Validate();
+  clear_line.Validate();
   ik.Validate();
 }
 
@@ -2043,9 +2044,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
     return result;
   }
   double t0 = robot.Time();
-  MotionOptions step = options.waypoint;
-  step.timeout = 0.1;
-  FollowWaypoints(robot, chain, rise, step);
+  FollowWaypoints(robot, chain, rise, options.clear_line);
   if (cross.empty()) {
     MoveJoints(robot, OpenHandGoal(chain, q_high, desc), options.transfer);
   } else {
@@ -2055,7 +2054,7 @@ GraspResult GraspBall(RobotInterface& robot, const robot::RobotDescription& desc
     MoveThrough(robot, goals,
                 SharedTime(options.transfer, options.transfer.duration, options.waypoint.duration, goals.size()));
   }
-  FollowWaypoints(robot, chain, down, step);
+  FollowWaypoints(robot, chain, down, options.clear_line);
   result.transfer_s = robot.Time() - t0;
   std::string worst;
   const double arm_error = ChainError(robot, chain, q_pre, &worst);

@@ -686,7 +686,11 @@ struct BallGraspOptions {
   std::vector<ObstacleBox> obstacles;
   double obstacle_margin_m = 0.0;
   MotionOptions transfer{2.0, 0.01, 0.02, 0.05, 2.0, kTransferSpeed};
-  MotionOptions waypoint{0.4, 0.01, 0.02, 0.05, 0.1};
+  MotionOptions waypoint{0.4, 0.01, 0.02, 0.05, 0.1};  // each approach and lift waypoint
+  /// Each waypoint of the straight rise to the crossing height and of the descent to the
+  /// pre-grasp: the empty hand in free space, at the transfers' peak joint speed (at the
+  /// approach's fixed 0.4 s a waypoint, the rise from a put-down took 1.2 s for 0.13 rad).
+  MotionOptions clear_line{0.4, 0.01, 0.02, 0.05, 0.1, kTransferSpeed};
   double close_time = 0.8;         // [s], > 0
   double hold_time = 0.5;          // [s], >= 0
   double empty_hand_tol = 0.05;    // [rad], > 0

@@ -8,6 +8,8 @@
 #include <numbers>
 #include <set>
 #include <sstream>
+#include <string>
+#include <tuple>
 
 #include <Eigen/Eigenvalues>
 
@@ -562,19 +564,25 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
   w.Line(2, "<light name=\"sun\" directional=\"true\" castshadow=\"true\" pos=\"0 0 3\" dir=\"0.3 0.2 -1\" diffuse=\"0.5 0.5 0.5\"/>");
   w.Line(2, "<geom name=\"floor\" class=\"world\" type=\"plane\" size=\"3 3 0.1\" material=\"floor\"/>");
 
-  // A third-person camera in front of the robot, to its right, looking at robot, table and rack.
-  scene.X_RO = LookAtFrame(Eigen::Vector3d(-1.15, -0.45, 0.60), Eigen::Vector3d(-0.20, 0.20, -0.05));
-  {
-    const Eigen::Isometry3d X_WO = scene.X_WR * scene.X_RO;
+  // Fixed cameras for looking at what happens (never for perception). "overview": in front of
+  // the robot, to its right, looking at robot, table and rack. "side": on the robot's left,
+  // looking across the table at the ball and the working tool (pictures of the tool actions).
+  // "rack_close": from the robot's left end of the rack's ledge, looking along it at the hand on
+  // a handle (the handle's cross-section, the fingers, the ledge and the board).
+  const Eigen::Vector3d& p_R_rack = spec.rack.origin;
+  const std::vector<std::tuple<const char*, Eigen::Isometry3d, int>> cameras = {
+      {"overview", LookAtFrame(Eigen::Vector3d(-1.15, -0.45, 0.60), Eigen::Vector3d(-0.20, 0.20, -0.05)), 50},
+      {"side", LookAtFrame(Eigen::Vector3d(-0.40, -1.25, 0.05), Eigen::Vector3d(-0.40, 0.0, -0.10)), 50},
+      {"rack_close",
+       LookAtFrame(p_R_rack + Eigen::Vector3d(-0.28, -0.17, 0.08), p_R_rack + Eigen::Vector3d(0.02, -0.09, 0.06)), 40},
+  };
+  for (const auto& [name, X_RC, fovy_deg] : cameras) {
+    scene.X_R_fixed_cameras[name] = X_RC;
+    const Eigen::Isometry3d X_WC = scene.X_WR * X_RC;
     // MuJoCo cameras look along -z with +y up: the OpenCV frame turned 180 deg about x.
-    w.Line(2, "<camera name=\"overview\" pos=\"" + Vec(X_WO.translation()) + "\" xyaxes=\"" +
-                  Vec(X_WO.linear().col(0)) + " " + Vec(-X_WO.linear().col(1)) + "\" fovy=\"50\"/>");
-    // A side camera on the robot's left, looking across the table at the ball and the working
-    // tool (pictures of the tool actions).
-    const Eigen::Isometry3d X_WS =
-        scene.X_WR * LookAtFrame(Eigen::Vector3d(-0.40, -1.25, 0.05), Eigen::Vector3d(-0.40, 0.0, -0.10));
-    w.Line(2, "<camera name=\"side\" pos=\"" + Vec(X_WS.translation()) + "\" xyaxes=\"" +
-                  Vec(X_WS.linear().col(0)) + " " + Vec(-X_WS.linear().col(1)) + "\" fovy=\"50\"/>");
+    w.Line(2, std::string("<camera name=\"") + name + "\" pos=\"" + Vec(X_WC.translation()) + "\" xyaxes=\"" +
+                  Vec(X_WC.linear().col(0)) + " " + Vec(-X_WC.linear().col(1)) + "\" fovy=\"" +
+                  std::to_string(fovy_deg) + "\"/>");
   }
 
   // Table and rack: the fixture boxes, in their bodies (one definition, shared with FixtureBoxes).

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -69,9 +70,10 @@ struct ComposedScene {
   Eigen::Isometry3d X_WR = Eigen::Isometry3d::Identity();  // robot root in world
   Eigen::Isometry3d X_RK = Eigen::Isometry3d::Identity();  // rack frame in robot root
   std::string ball_body = "ball";
-  /// A fixed third-person camera "overview" (for looking at what happens, not for perception):
-  /// its OpenCV optical frame in R. Calibrated extrinsics, like a camera on a tripod.
-  Eigen::Isometry3d X_RO = Eigen::Isometry3d::Identity();
+  /// The fixed third-person cameras (for looking at what happens, not for perception) by name,
+  /// "overview", "side" and "rack_close": each one's OpenCV optical frame in R. Calibrated
+  /// extrinsics, like cameras on tripods.
+  std::map<std::string, Eigen::Isometry3d> X_R_fixed_cameras;
 };
 
 /// Optical (OpenCV) frame of a camera at `p_eye` looking at `p_target`, image up toward +z.

@@ -105,10 +105,10 @@ TEST(MotionTest, ASpeedLimitedMotionLastsAsLongAsItsLargestJointChangeNeeds) {
   options.max_speed = 1.5;
   options.min_duration = 0.3;
   // 0.4 rad at a 1.5 rad/s peak: 1.875 * 0.4 / 1.5 = 0.5 s; 2 rad would need 2.5 s (capped at
-  // duration); 1 mrad would need 1.25 ms (raised to min_duration). Without max_speed: duration.
+  // duration); 2 mrad would need 2.5 ms (raised to min_duration). Without max_speed: duration.
   EXPECT_NEAR(options.TrajectoryTime(0.4, options.duration), 0.5, 1e-12);
   EXPECT_DOUBLE_EQ(options.TrajectoryTime(2.0, options.duration), 2.0);
-  EXPECT_DOUBLE_EQ(options.TrajectoryTime(1e-3, options.duration), 0.3);
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(2e-3, options.duration), 0.3);
   MotionOptions fixed = options;
   fixed.max_speed = 0;
   EXPECT_DOUBLE_EQ(fixed.TrajectoryTime(0.4, fixed.duration), 2.0);
@@ -143,6 +143,30 @@ TEST(MotionTest, ASpeedLimitedMotionLastsAsLongAsItsLargestJointChangeNeeds) {
   bad.min_duration = 0;
   EXPECT_THAT([&] { MoveJoints(robot, {{"a", 0.1}}, bad); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("min_duration")));
+}
+
+TEST(MotionTest, AMotionToWhereTheTargetsAreOnlyWaitsForArrival) {
+  MotionOptions options;  // fixed 1.5 s
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(0.0, options.duration), 0.0);
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(kNegligibleSpanRad, options.duration), 0.0);
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(2 * kNegligibleSpanRad, options.duration), 1.5);
+  options.max_speed = 1.5;
+  EXPECT_DOUBLE_EQ(options.TrajectoryTime(0.0, options.duration), 0.0);
+  FakeRobot robot(2);
+  ASSERT_TRUE(MoveJoints(robot, {{"a", 0.3}}).reached);
+  // Already there and still: no trajectory time, for one goal and for a path of them.
+  const MotionResult same = MoveJoints(robot, {{"a", 0.3}, {"b", 0.0}});
+  EXPECT_TRUE(same.reached);
+  EXPECT_LT(same.elapsed, 0.05);
+  const MotionResult path = MoveThrough(robot, {{{"a", 0.3}}, {{"b", 0.0}}, {{"a", 0.3}}});
+  EXPECT_TRUE(path.reached);
+  EXPECT_LT(path.elapsed, 0.05);
+  // Targets there but the encoders not yet: it waits for them as any motion does.
+  robot.SetPositionTargets(Eigen::Vector2d(0.6, 0.0));
+  const MotionResult catching_up = MoveJoints(robot, {{"a", 0.6}});
+  EXPECT_TRUE(catching_up.reached);
+  EXPECT_GT(catching_up.elapsed, 0.05);
+  EXPECT_NEAR(robot.ReadEncoders()[0], 0.6, options.position_tol);
 }
 
 TEST(MotionTest, MoveThroughPassesEveryGoalWithoutStopping) {

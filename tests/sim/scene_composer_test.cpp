@@ -164,6 +164,28 @@ TEST_F(ComposerTest, FixtureBoxesAreTheComposedGeoms) {
   }
 }
 
+TEST_F(ComposerTest, FixedCamerasAreWhereTheSceneSaysTheyAre) {
+  const ComposedScene scene = ComposeScene(*spec_, *robot_, *library_, PlanScene(*spec_, names_, 3, {}));
+  World world(scene.mjcf, "cameras");
+  const mjModel* m = world.mj_model();
+  mjData* d = world.mj_data();
+  mj_kinematics(m, d);
+  ASSERT_EQ(scene.X_R_fixed_cameras.size(), 3u);
+  for (const char* name : {"overview", "side", "rack_close"}) {
+    ASSERT_TRUE(scene.X_R_fixed_cameras.count(name)) << name;
+    const int id = mj_name2id(m, mjOBJ_CAMERA, name);
+    ASSERT_GE(id, 0) << name;
+    // The OpenCV optical frame is MuJoCo's camera frame turned by pi about x.
+    const Eigen::Isometry3d X_WC = scene.X_WR * scene.X_R_fixed_cameras.at(name);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(d->cam_xpos[3 * id + k], X_WC.translation()[k], 1e-7) << name;
+      EXPECT_NEAR(d->cam_xmat[9 * id + 3 * k + 0], X_WC.linear()(k, 0), 1e-6) << name;
+      EXPECT_NEAR(d->cam_xmat[9 * id + 3 * k + 1], -X_WC.linear()(k, 1), 1e-6) << name;
+      EXPECT_NEAR(d->cam_xmat[9 * id + 3 * k + 2], -X_WC.linear()(k, 2), 1e-6) << name;
+    }
+  }
+}
+
 TEST_F(ComposerTest, BrokenMjcfIsReportedWithSource) {
   EXPECT_THAT([] { World("<mujoco><worldbody><geom type='box'/></worldbody>", "broken.xml"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("broken.xml")));
