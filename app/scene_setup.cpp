@@ -140,7 +140,12 @@ LookResult LookAt(RobotInterface& interface, const robot::RobotDescription& robo
   if (!arm_down) {
     for (auto it = observe.begin(); it != observe.end();) it = it->first.rfind("r_", 0) == 0 ? observe.erase(it) : std::next(it);
   }
-  const Eigen::VectorXd q = robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), observe);
+  // The gaze is solved from the neck and torso yaw at zero, not from where they are: the same
+  // target gives the same posture whatever the robot looked at before (the rack look after the
+  // table look turned the torso 59 deg instead of 32, and grasps planned from there differed).
+  std::map<std::string, double> seed = observe;
+  for (const char* joint : {"torso_yaw", "neck_pitch", "neck_roll", "neck_yaw"}) seed[joint] = 0.0;
+  const Eigen::VectorXd q = robot.WithJoints(ModelQ(robot, interface.JointNames(), interface.PositionTargets()), seed);
   result.gaze = control::LookAt(robot, q, p_R_target);
   if (!result.gaze.converged) {
     spdlog::warn(
