@@ -1024,6 +1024,12 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
     last.regrasp_reason = regrasp_reason;
     return last;
   };
+  // A handle lying across the rack (within kLyingSin of horizontal: rot3) rests on the ledge
+  // against the board, where the choked grasps close on nothing or let it roll out of the
+  // fingertips: the whole handle first, as grasp-gt grasps it.
+  constexpr double kLyingSin = 0.34;  // sin 20 deg
+  const bool lying = std::abs(z_H.z()) < kLyingSin;
+  if (lying && max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
   for (const int direction : {1, 0}) {
     skip_direction = false;
     for (const double choke : {0.6, 0.3, 0.0}) {
@@ -1033,7 +1039,7 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
       if (done(X, direction, 0.0)) return finish();
     }
   }
-  if (max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
+  if (!lying && max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
   if (blocked > 0) last.reason += Cat(" (", blocked, " grasp transfers blocked on the way and backed off)");
   return finish();
 }

@@ -259,6 +259,48 @@ TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
   EXPECT_GE(lift, kMinLiftM);
 }
 
+// A tool lying across the rack (rot3) rests on the ledge against the board: choked toward the
+// handle's end first, the hand closed on nothing or let it roll out of the fingertips (1 of the 32
+// rot3 episodes of table53 --episodes grasped its tool; the regression suite's
+// episodes_table53_lying runs four of them). GraspToolForAction takes a lying handle where the
+// whole-handle planner (grasp-gt's) puts it first: the same grasp as GraspHandle sliding either
+// way from the same posture, held at the first try.
+TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
+  SceneRequest request;
+  request.tools = {"hoe_1"};
+  request.cells = {"rot3"};
+  const LoadedScene scene = LoadScene(request);
+  const sim::PlacedTool& placed = scene.composed.tools.at(0);
+  const toollib::ToolModel* model = LibraryModel(scene, placed.name);
+  ASSERT_NE(model, nullptr);
+  const double free_slide = FreeHandleSlide(scene.robot, model->handle.length);
+  control::GraspOptions options;
+  options.obstacles = WorkspaceObstacles(scene.spec);
+  auto grasp = [&](bool for_action) {
+    sim::World world(scene.composed.mjcf, "lying handle test");
+    world.SettleFreeBodies(scene.spec.physics.settle_time);
+    sim::SimRobot robot(world);
+    LookAt(robot, scene.robot, RackViewTarget(scene.spec));  // as the episode grasps
+    const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
+    const Eigen::Isometry3d X_RT = X_RW * world.ground_truth().Pose(placed.body);
+    const Eigen::Isometry3d X_RH = X_RT * HandleFrame(model->handle);
+    EXPECT_LT(std::abs(X_RH.linear().col(2).z()), 0.1) << "the handle no longer lies: pick another case";
+    control::GraspOptions o = options;
+    o.handle_slide_m = free_slide;
+    const control::GraspResult g =
+        for_action ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, free_slide, options)
+                   : control::GraspHandle(robot, scene.robot, X_RH, o);
+    const double lift = (X_RW * world.ground_truth().Pose(placed.body)).translation().z() - X_RT.translation().z();
+    return std::make_pair(g, lift);
+  };
+  const auto [whole, whole_lift] = grasp(false);
+  const auto [g, lift] = grasp(true);
+  ASSERT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
+  EXPECT_EQ(g.regrasps, 0) << g.regrasp_reason;
+  EXPECT_TRUE(g.X_RP_grasp.isApprox(whole.X_RP_grasp, 1e-9)) << "not the whole-handle planner's grasp";
+  EXPECT_GE(lift, kMinLiftM);
+}
+
 TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
   SceneRequest request;
   request.tools = {"stick_2"};
