@@ -21,11 +21,14 @@ app::LoadedScene FullScene() {
 /// One mj_step of the full scene while the arm follows a slow sinusoid (contacts on the rack).
 /// Args: physics.noslip_iterations (the scene's default 30; MuJoCo #3328 measured the creep of a
 /// held object ~110x smaller with 10 than without noslip), and sleeping (1: the scene's
-/// physics.sleep_window, resting tools and ball leave the contact solve; 0: plain MuJoCo).
+/// physics.sleep_window, resting tools and ball leave the contact solve; 0: plain MuJoCo), and the
+/// constraint solver's Jacobian layout and solver (0: the scene's own, 1: sparse Jacobian, 2: CG).
 void BM_SimStepFullScene(benchmark::State& state) {
   app::LoadedScene scene = FullScene();
   scene.spec.physics.noslip_iterations = static_cast<int>(state.range(0));
   if (state.range(1) == 0) scene.spec.physics.sleep_window = 0.0;
+  if (state.range(2) == 1) scene.spec.physics.jacobian = "sparse";
+  if (state.range(2) == 2) scene.spec.physics.solver = "CG";
   std::vector<std::string> names;
   for (const auto& tool : scene.library) names.push_back(tool.name);
   std::vector<sim::ToolPlacement> placements;
@@ -57,11 +60,14 @@ void BM_SimStepFullScene(benchmark::State& state) {
       benchmark::Counter(world.timestep() * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_SimStepFullScene)
-    ->ArgNames({"noslip", "sleep"})
-    ->Args({30, 1})
-    ->Args({30, 0})
-    ->Args({10, 0})
-    ->Args({0, 0})
+    ->ArgNames({"noslip", "sleep", "solver"})
+    ->Args({30, 1, 0})
+    ->Args({30, 1, 1})
+    ->Args({30, 1, 2})
+    ->Args({30, 0, 0})
+    ->Args({30, 0, 1})
+    ->Args({10, 0, 0})
+    ->Args({0, 0, 0})
     ->Unit(benchmark::kMicrosecond)
     ->MinTime(2.0);
 

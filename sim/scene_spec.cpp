@@ -125,6 +125,13 @@ void SceneSpec::Validate() const {
     ThrowInvalid("SceneSpec: field 'physics.cone' is '", physics.cone,
                  "', expected 'elliptic' or 'pyramidal'");
   }
+  if (physics.solver != "Newton" && physics.solver != "CG" && physics.solver != "PGS") {
+    ThrowInvalid("SceneSpec: field 'physics.solver' is '", physics.solver, "', expected 'Newton', 'CG' or 'PGS'");
+  }
+  if (physics.jacobian != "auto" && physics.jacobian != "dense" && physics.jacobian != "sparse") {
+    ThrowInvalid("SceneSpec: field 'physics.jacobian' is '", physics.jacobian,
+                 "', expected 'auto', 'dense' or 'sparse'");
+  }
   Require(physics.impratio >= 1, "physics.impratio", physics.impratio, ">= 1");
   Require(physics.noslip_iterations >= 0, "physics.noslip_iterations", physics.noslip_iterations,
           ">= 0");
@@ -197,6 +204,8 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Number("impratio", spec.physics.impratio);
     r.Integer("noslip_iterations", spec.physics.noslip_iterations);
     r.Number("noslip_tolerance", spec.physics.noslip_tolerance);
+    r.String("solver", spec.physics.solver);
+    r.String("jacobian", spec.physics.jacobian);
     r.Number("settle_time", spec.physics.settle_time);
     r.Number("sleep_window", spec.physics.sleep_window);
     r.Number("sleep_tolerance", spec.physics.sleep_tolerance);

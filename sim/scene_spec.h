@@ -62,6 +62,10 @@ struct PhysicsSpec {
   double impratio = 10.0;            // >= 1
   int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
   double noslip_tolerance = 1e-6;    // > 0; the noslip pass stops below this improvement (MuJoCo's default)
+  /// MuJoCo's constraint solver ("Newton", "CG" or "PGS") and its Jacobian layout ("dense",
+  /// "sparse", or "auto": dense below 60 degrees of freedom, which the scene always is).
+  std::string solver = "Newton";
+  std::string jacobian = "auto";
   double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
   /// Sleeping of resting tools and ball (sim::SleepSettings): still for sleep_window [s] (>= 0,
   /// 0 = never sleep, plain MuJoCo) within sleep_tolerance [m] (> 0), woken when a robot geom or

@@ -164,6 +164,21 @@ TEST_F(ComposerTest, FixtureBoxesAreTheComposedGeoms) {
   }
 }
 
+// The scene's physics settings reach the compiled model (the solver's settings decide how fast a
+// step is and how well a grasp holds).
+TEST_F(ComposerTest, PhysicsSettingsReachTheModel) {
+  SceneSpec spec = *spec_;
+  spec.physics.solver = "CG";
+  spec.physics.jacobian = "sparse";
+  spec.physics.noslip_iterations = 7;
+  World world(ComposeScene(spec, *robot_, *library_, PlanScene(spec, names_, 3, {})).mjcf, "physics");
+  const mjModel* m = world.mj_model();
+  EXPECT_EQ(m->opt.solver, mjSOL_CG);
+  EXPECT_EQ(m->opt.jacobian, mjJAC_SPARSE);
+  EXPECT_EQ(m->opt.noslip_iterations, 7);
+  EXPECT_EQ(m->opt.cone, mjCONE_ELLIPTIC);
+}
+
 TEST_F(ComposerTest, FixedCamerasAreWhereTheSceneSaysTheyAre) {
   const ComposedScene scene = ComposeScene(*spec_, *robot_, *library_, PlanScene(*spec_, names_, 3, {}));
   World world(scene.mjcf, "cameras");

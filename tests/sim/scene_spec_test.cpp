@@ -25,9 +25,11 @@ TEST(SceneSpecTest, EmptyObjectGivesDefaults) {
 TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
       R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},
-          "physics": {"noslip_tolerance": 1e-4}})",
+          "physics": {"noslip_tolerance": 1e-4, "solver": "CG", "jacobian": "sparse"}})",
       "inline");
   EXPECT_DOUBLE_EQ(spec.physics.noslip_tolerance, 1e-4);
+  EXPECT_EQ(spec.physics.solver, "CG");
+  EXPECT_EQ(spec.physics.jacobian, "sparse");
   EXPECT_DOUBLE_EQ(spec.rack.incline_deg, 20);
   EXPECT_DOUBLE_EQ(spec.ball.radius, 0.04);
   EXPECT_EQ(spec.tools.choices, std::vector<std::string>{"hoe_1"});
@@ -52,6 +54,10 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.wake_margin")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"cone": "round"}})", "cone.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("round")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"solver": "Gauss"}})", "solver.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("physics.solver"), HasSubstr("Gauss"))));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"jacobian": "banded"}})", "jac.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("physics.jacobian"), HasSubstr("banded"))));
   EXPECT_THAT([] { ParseSceneSpec("[1, 2]", "array.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("must be an object")));
   EXPECT_THAT([] { LoadSceneSpec("/nonexistent/scene.json"); },
