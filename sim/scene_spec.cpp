@@ -1,6 +1,8 @@
 #include "sim/scene_spec.h"
 
+#include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -93,6 +95,14 @@ void Require(bool ok, std::string_view field, double value, std::string_view exp
   if (!ok) ThrowInvalid("SceneSpec: field '", field, "' is ", value, ", expected ", expected);
 }
 
+// A text field that must be one of `allowed` (MuJoCo's option keywords).
+void RequireOneOf(std::string_view field, const std::string& value, std::initializer_list<std::string_view> allowed) {
+  if (std::find(allowed.begin(), allowed.end(), value) != allowed.end()) return;
+  std::string expected;
+  for (const std::string_view a : allowed) expected += (expected.empty() ? "'" : ", '") + std::string(a) + "'";
+  ThrowInvalid("SceneSpec: field '", field, "' is '", value, "', expected one of ", expected);
+}
+
 }  // namespace
 
 void SceneSpec::Validate() const {
@@ -121,17 +131,9 @@ void SceneSpec::Validate() const {
           tools.max_count, "in [min_count, 3]");
   Require(physics.timestep > 0 && physics.timestep <= 0.01, "physics.timestep", physics.timestep,
           "in (0, 0.01] s");
-  if (physics.cone != "elliptic" && physics.cone != "pyramidal") {
-    ThrowInvalid("SceneSpec: field 'physics.cone' is '", physics.cone,
-                 "', expected 'elliptic' or 'pyramidal'");
-  }
-  if (physics.solver != "Newton" && physics.solver != "CG" && physics.solver != "PGS") {
-    ThrowInvalid("SceneSpec: field 'physics.solver' is '", physics.solver, "', expected 'Newton', 'CG' or 'PGS'");
-  }
-  if (physics.jacobian != "auto" && physics.jacobian != "dense" && physics.jacobian != "sparse") {
-    ThrowInvalid("SceneSpec: field 'physics.jacobian' is '", physics.jacobian,
-                 "', expected 'auto', 'dense' or 'sparse'");
-  }
+  RequireOneOf("physics.cone", physics.cone, {"elliptic", "pyramidal"});
+  RequireOneOf("physics.solver", physics.solver, {"Newton", "CG", "PGS"});
+  RequireOneOf("physics.jacobian", physics.jacobian, {"auto", "dense", "sparse"});
   Require(physics.impratio >= 1, "physics.impratio", physics.impratio, ">= 1");
   Require(physics.noslip_iterations >= 0, "physics.noslip_iterations", physics.noslip_iterations,
           ">= 0");
