@@ -68,6 +68,11 @@ void IkOptions::Validate() const {
   require(std::isfinite(default_rest_weight) && default_rest_weight >= 0, "default_rest_weight", default_rest_weight,
           ">= 0");
   require(presolve_iterations > 0, "presolve_iterations", presolve_iterations, "> 0");
+  require(presolve_stall_window >= 0, "presolve_stall_window", presolve_stall_window, ">= 0");
+  require(presolve_stall_drop >= 0 && presolve_stall_drop < 1, "presolve_stall_drop", presolve_stall_drop,
+          "in [0, 1)");
+  require(std::isfinite(presolve_stall_error_m) && presolve_stall_error_m >= 0, "presolve_stall_error_m",
+          presolve_stall_error_m, ">= 0");
   require(rest_iterations >= 0, "rest_iterations", rest_iterations, ">= 0");
   require(presolve_restarts >= 0, "presolve_restarts", presolve_restarts, ">= 0");
   require(std::isfinite(orientation_length_m) && orientation_length_m > 0, "orientation_length_m",
@@ -283,8 +288,15 @@ struct CartesianSolver::Impl {
     PoseErrors e = ComputeErrors(X_target, X);
     double cost = Cost(e);
     double damping = kInitialDamping;
+    const int window = options.presolve_stall_window;
+    double window_cost = cost;  // the cost `window` iterations ago
     for (int it = 0; it < options.presolve_iterations; ++it) {
       if (WithinTolerance(e, kPresolveInside)) return true;
+      if (window > 0 && it > 0 && it % window == 0) {
+        const double hopeless = options.presolve_stall_error_m * options.presolve_stall_error_m;
+        if (cost > hopeless && cost > (1.0 - options.presolve_stall_drop) * window_cost) return false;  // stalled
+        window_cost = cost;
+      }
       ++iterations;
       // Normal equations of the weighted residual [e_p; L e_r] (rows of J weighted alike).
       H.noalias() = J.topRows<3>().transpose() * J.topRows<3>();

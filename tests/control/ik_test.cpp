@@ -109,6 +109,34 @@ TEST_F(IkTest, WithoutIpoptRescueFailuresAreReportedAtOnce) {
   EXPECT_GE(converged, 19);
 }
 
+// A start that stalls far from an out-of-reach target is given up early: the same verdict in a
+// fraction of the LM iterations. Targets in reach converge to the same postures as without the
+// stall test (their starts never stall that far off).
+TEST_F(IkTest, StartsStalledFarFromTheTargetAreGivenUp) {
+  IkOptions patient;
+  patient.ipopt_after_failed_presolve = false;
+  patient.presolve_stall_window = 0;
+  IkOptions quick = patient;
+  quick.presolve_stall_window = 10;
+  CartesianSolver slow(*chain_, robot_->HomeQ(), patient);
+  CartesianSolver fast(*chain_, robot_->HomeQ(), quick);
+  Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());
+  X_RT.translation() = Eigen::Vector3d(-1.0, 0.1, 0.1);  // out of reach in front
+  const IkResult far_slow = slow.Solve(X_RT, robot_->HomeQ());
+  const IkResult far_fast = fast.Solve(X_RT, robot_->HomeQ());
+  EXPECT_EQ(far_slow.status, IkStatus::kUnreachable) << ToString(far_slow.status);
+  EXPECT_EQ(far_fast.status, IkStatus::kUnreachable) << ToString(far_fast.status);
+  EXPECT_LT(far_fast.iterations * 2, far_slow.iterations) << far_fast.iterations << " vs " << far_slow.iterations;
+  Rng rng(DeriveSeed(1, "ik_test_stall"));
+  for (int trial = 0; trial < 20; ++trial) {
+    const Eigen::Isometry3d X = chain_->TipPose(RandomArmQ(rng));
+    const IkResult a = slow.Solve(X, robot_->HomeQ());
+    const IkResult b = fast.Solve(X, robot_->HomeQ());
+    EXPECT_EQ(a.status, b.status) << "trial " << trial;
+    EXPECT_TRUE(a.q.isApprox(b.q, 1e-12)) << "trial " << trial;
+  }
+}
+
 TEST_F(IkTest, BadInputIsNamed) {
   CartesianSolver solver(*chain_, robot_->HomeQ());
   Eigen::Isometry3d X_RT = chain_->TipPose(robot_->HomeQ());
@@ -125,6 +153,14 @@ TEST_F(IkTest, BadInputIsNamed) {
   options.position_tolerance_m = -1.0;
   EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("position_tolerance_m")));
+  options = {};
+  options.presolve_stall_drop = 1.0;
+  EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("presolve_stall_drop")));
+  options = {};
+  options.presolve_stall_error_m = NAN;
+  EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("presolve_stall_error_m")));
   options = {};
   options.rest_weights["neck_yaw"] = 1.0;
   EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
