@@ -724,6 +724,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.reason = e.reason;
       s.details = {{"gaze_converged", view.gaze_converged}, {"segments", e.segments},
                    {"points", e.points},      {"fit_error_m", e.fit_error_m},
+                   {"global_fit_error_m", e.global_fit_error_m}, {"prior_fit_error_m", e.prior_fit_error_m},
+                   {"from_prior", e.from_prior},
                    {"correction_deg", e.correction_deg}, {"correction_m", e.correction_m},
                    {"axis_offset_m", e.axis_offset_m},      {"slide_corrected_m", e.slide_corrected_m},
                    {"plan_error_deg_truth", plan_error.rotation_deg},
