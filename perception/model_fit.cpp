@@ -9,9 +9,9 @@
 
 #include <Eigen/Eigenvalues>
 #include <pcl/console/print.h>
-#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
+#include <pcl/registration/correspondence_estimation.h>
 #include <pcl/registration/icp.h>
 #include <pcl/registration/transformation_estimation.h>
 #include <pcl/search/kdtree.h>
@@ -20,19 +20,13 @@
 #include "common/check.h"
 #include "common/rng.h"
 #include "perception/internal/log.h"
+#include "perception/internal/nearest_neighbours.h"
 
 namespace toolbench::perception {
 namespace {
 
 using Point = pcl::PointNormal;
 using Cloud = pcl::PointCloud<Point>;
-
-Point MakePoint(const Eigen::Vector3d& p) {
-  Point out;
-  out.getVector3fMap() = p.cast<float>();
-  out.getNormalVector3fMap() = Eigen::Vector3f::Zero();
-  return out;
-}
 
 // Normals are optional (the observed cloud has none; point-to-plane uses the target's only).
 Cloud::Ptr ToPcl(const Eigen::Matrix3Xf& points, const Eigen::Matrix3Xf* normals = nullptr) {
@@ -46,19 +40,6 @@ Cloud::Ptr ToPcl(const Eigen::Matrix3Xf& points, const Eigen::Matrix3Xf* normals
   return cloud;
 }
 
-// Damped point-to-plane ICP (linearised rotation, as PCL's TransformationEstimationPointToPlaneLLS)
-// of `source` (observed points) onto `model` (points with unit normals), starting from X_TR.
-// Written out instead of pcl::IterativeClosestPoint because ICP is the whole cost of recognition
-// and PCL's loop copies and transforms the source cloud, allocates correspondence vectors and
-// runs a rejector every iteration: this loop makes one nearest-neighbour query per point and
-// nothing else (2-3x faster on the few hundred points ranking uses). The small Levenberg damping
-// matters: PCL's LLS inverts the 6x6 normal matrix outright, which is singular for a shape
-// symmetric about an axis (a stick's spin is unobservable) and returns NaN; damping leaves the
-// unobservable direction unchanged instead. Stopping rules follow PCL's
-// DefaultConvergenceCriteria as pcl::IterativeClosestPoint sets them up: the iteration cap; a
-// step with squared translation <= transformation_epsilon [m^2] and rotation cosine >=
-// 1 - transformation_epsilon; or a relative change of the mean squared correspondence distance
-// below euclidean_fitness_epsilon (PCL's absolute threshold, 1e-12 m^2, is never the binding one).
 // Point-to-plane step (linearised rotation, as PCL's TransformationEstimationPointToPlaneLLS)
 // with a small Levenberg damping. PCL's version inverts the 6x6 normal matrix outright, which
 // is singular for a shape symmetric about an axis (a stick's spin is unobservable): the NaN it
@@ -118,6 +99,48 @@ class DampedPointToPlane : public pcl::registration::TransformationEstimation<Po
   }
 };
 
+// pcl::registration::CorrespondenceEstimation with each iteration's nearest-neighbour queries
+// asked as one batch of internal::NearestNeighbours (the same tree and answers as the
+// pcl::search::KdTree it replaces, without FLANN's per-query overhead): the same pairs in the same
+// order, so pcl::IterativeClosestPoint takes the same steps. The ICP's own search tree is never
+// built (it is set with force_no_recompute, RunIcpOn).
+class BatchedCorrespondences : public pcl::registration::CorrespondenceEstimation<Point, Point, float> {
+ public:
+  explicit BatchedCorrespondences(internal::NearestNeighbours target) : target_nn_(std::move(target)) {}
+
+  void determineCorrespondences(pcl::Correspondences& correspondences, double max_distance) override {
+    // PCLBase's part of initCompute (the source indices); the base class's would build tree_.
+    if (!pcl::PCLBase<Point>::initCompute()) return;
+    const pcl::Indices& indices = *indices_;
+    queries_.resize(3, static_cast<Eigen::Index>(indices.size()));
+    for (std::size_t k = 0; k < indices.size(); ++k) {
+      queries_.col(static_cast<Eigen::Index>(k)) = (*input_)[static_cast<std::size_t>(indices[k])].getVector3fMap();
+    }
+    target_nn_.Find(queries_, match_, sq_distance_);
+    const double max_sq = max_distance * max_distance;
+    correspondences.clear();
+    for (std::size_t k = 0; k < indices.size(); ++k) {
+      if (sq_distance_[k] > max_sq) continue;
+      correspondences.emplace_back(indices[k], match_[k], sq_distance_[k]);
+    }
+    deinitCompute();
+  }
+
+  void determineReciprocalCorrespondences(pcl::Correspondences& /*correspondences*/, double /*max_distance*/) override {
+    ThrowInvalid("BatchedCorrespondences: reciprocal correspondences are not supported");
+  }
+
+  pcl::registration::CorrespondenceEstimationBase<Point, Point, float>::Ptr clone() const override {
+    return std::make_shared<BatchedCorrespondences>(*this);
+  }
+
+ private:
+  internal::NearestNeighbours target_nn_;
+  Eigen::Matrix3Xf queries_;
+  std::vector<int> match_;
+  std::vector<float> sq_distance_;
+};
+
 constexpr int kStallIterations = 10;
 constexpr double kStallImprovement = 1e-4;  // relative MSE improvement that counts as progress
 
@@ -128,21 +151,34 @@ struct IcpLimits {
   double euclidean_fitness_epsilon = 1e-6;
 };
 
+// Damped point-to-plane ICP (linearised rotation, as PCL's TransformationEstimationPointToPlaneLLS)
+// of `source` (observed points) onto `model` (points with unit normals), starting from X_TR.
+// Written out instead of pcl::IterativeClosestPoint because ICP is the whole cost of recognition
+// and PCL's loop copies and transforms the source cloud, allocates correspondence vectors and
+// runs a rejector every iteration: this loop transforms the points, asks their nearest model
+// points as one batch and accumulates the step, nothing else (2-3x faster on the few hundred
+// points ranking uses, measured when both asked one point at a time). The small Levenberg
+// damping matters: PCL's LLS inverts the 6x6 normal matrix outright, which is singular for a
+// shape symmetric about an axis (a stick's spin is unobservable) and returns NaN; damping leaves
+// the unobservable direction unchanged instead. Stopping rules follow PCL's
+// DefaultConvergenceCriteria as pcl::IterativeClosestPoint sets them up: the iteration cap; a
+// step with squared translation <= transformation_epsilon [m^2] and rotation cosine >=
+// 1 - transformation_epsilon; or a relative change of the mean squared correspondence distance
+// below euclidean_fitness_epsilon (PCL's absolute threshold, 1e-12 m^2, is never the binding one).
 // The step is linearised about `p_T_centre` (the model's centroid), not about the frame origin:
 // the tool frame's origin is at one end of the tool, and rotations about a far point couple with
 // translations, which made the damped step crawl for hundreds of iterations.
-Eigen::Isometry3d PointToPlaneIcp(const Cloud& source, const Cloud& model, const pcl::search::KdTree<Point>& tree,
+Eigen::Isometry3d PointToPlaneIcp(const Cloud& source, const Cloud& model, const internal::NearestNeighbours& model_nn,
                                   const Eigen::Vector3d& p_T_centre, Eigen::Isometry3d X_TR, const IcpLimits& limits,
                                   bool& converged) {
   converged = false;
-  pcl::Indices index(1);
-  std::vector<float> sq_distance(1);
+  std::vector<int> index;
+  std::vector<float> sq_distance;
+  Eigen::Matrix3Xf queries(3, static_cast<Eigen::Index>(source.size()));
   const float max_sq = static_cast<float>(limits.max_correspondence_distance * limits.max_correspondence_distance);
   double previous_mse = std::numeric_limits<double>::infinity();
   double best_mse = std::numeric_limits<double>::infinity();
   int stalled = 0;  // iterations since the MSE last improved by kStallImprovement
-  Point query;
-  query.getNormalVector3fMap() = Eigen::Vector3f::Zero();
   for (int iteration = 0; iteration < limits.iterations; ++iteration) {
     const Eigen::Matrix3f R = X_TR.linear().cast<float>();
     const Eigen::Vector3f t = X_TR.translation().cast<float>();
@@ -150,17 +186,20 @@ Eigen::Isometry3d PointToPlaneIcp(const Cloud& source, const Cloud& model, const
     Eigen::Matrix<double, 6, 1> Atb = Eigen::Matrix<double, 6, 1>::Zero();
     double sum_sq = 0.0;
     int pairs = 0;
-    for (const Point& s : source) {
-      query.getVector3fMap() = R * s.getVector3fMap() + t;
-      if (tree.nearestKSearch(query, 1, index, sq_distance) < 1 || sq_distance[0] > max_sq) continue;
-      const Point& m = model[static_cast<std::size_t>(index[0])];
-      const Eigen::Vector3d p = query.getVector3fMap().cast<double>() - p_T_centre;
+    for (std::size_t k = 0; k < source.size(); ++k) {
+      queries.col(static_cast<Eigen::Index>(k)) = R * source[k].getVector3fMap() + t;
+    }
+    model_nn.Find(queries, index, sq_distance);
+    for (std::size_t k = 0; k < source.size(); ++k) {
+      if (sq_distance[k] > max_sq) continue;
+      const Point& m = model[static_cast<std::size_t>(index[k])];
+      const Eigen::Vector3d p = queries.col(static_cast<Eigen::Index>(k)).cast<double>() - p_T_centre;
       const Eigen::Vector3d n = m.getNormalVector3fMap().cast<double>();
       Eigen::Matrix<double, 6, 1> a;
       a << p.cross(n), n;
       AtA.selfadjointView<Eigen::Upper>().rankUpdate(a);
       Atb += a * n.dot(m.getVector3fMap().cast<double>() - p_T_centre - p);
-      sum_sq += sq_distance[0];
+      sum_sq += sq_distance[k];
       ++pairs;
     }
     if (pairs < 6) break;  // too few correspondences: keep the pose (PCL gives up the same way)
@@ -396,7 +435,7 @@ struct ModelFitter::Impl {
   PrincipalFrame frame;
   Eigen::Vector3d extents = Eigen::Vector3d::Zero();
   Cloud::Ptr target;
-  pcl::search::KdTree<Point>::Ptr target_tree;
+  internal::NearestNeighbours target_nn;
   SurfaceSamples score_samples;  // evenly picked subset of `samples` for the unexplained fraction
   Eigen::Vector3d handle_axis_T = Eigen::Vector3d::UnitZ();   // unit; the view check turns about it
   Eigen::Vector3d handle_centre_T = Eigen::Vector3d::Zero();  // a point on that axis [m]
@@ -409,7 +448,7 @@ struct ModelFitter::Impl {
     Cloud::Ptr source;
     Eigen::Matrix3Xf coarse;       // at most coarse_points
     Cloud::Ptr coarse_source;
-    pcl::KdTreeFLANN<Point> tree;  // over `observed`, only with a camera
+    internal::NearestNeighbours observed_nn;  // over `observed`, only with a camera
   };
 
   void Observe(const Eigen::Matrix3Xf& p_R, bool with_camera, int max_points, Observation& o) const {
@@ -420,16 +459,16 @@ struct ModelFitter::Impl {
     o.coarse_source = ToPcl(o.coarse);
     // The unexplained test asks "is any observed point within visible_distance (1 cm)": the
     // subsampled cloud (spacing a few mm) answers it as well as the full one, at a lower cost.
-    if (with_camera) o.tree.setInputCloud(ToPcl(o.observed));
+    if (with_camera) o.observed_nn = internal::NearestNeighbours(o.observed);
   }
 
   // Runs ICP from X_TR_guess (observed R -> model T) and returns the refined X_TR.
   Eigen::Isometry3d RunIcp(const Cloud::Ptr& source, const Eigen::Isometry3d& X_TR_guess,
                            int iterations, bool own_loop, bool& converged) const {
-    return RunIcpOn(target, target_tree, source, X_TR_guess, iterations, own_loop, converged);
+    return RunIcpOn(target, target_nn, source, X_TR_guess, iterations, own_loop, converged);
   }
 
-  Eigen::Isometry3d RunIcpOn(const Cloud::Ptr& model, const pcl::search::KdTree<Point>::Ptr& model_tree,
+  Eigen::Isometry3d RunIcpOn(const Cloud::Ptr& model, const internal::NearestNeighbours& model_nn,
                              const Cloud::Ptr& source, const Eigen::Isometry3d& X_TR_guess, int iterations,
                              bool own_loop, bool& converged) const {
     Eigen::Isometry3d X_TR = X_TR_guess;
@@ -439,17 +478,18 @@ struct ModelFitter::Impl {
       limits.max_correspondence_distance = options.max_correspondence_distance;
       limits.transformation_epsilon = options.transformation_epsilon;
       limits.euclidean_fitness_epsilon = options.euclidean_fitness_epsilon;
-      X_TR = PointToPlaneIcp(*source, *model, *model_tree, frame.centroid, X_TR_guess, limits, converged);
+      X_TR = PointToPlaneIcp(*source, *model, model_nn, frame.centroid, X_TR_guess, limits, converged);
     } else {
       // PCL's ICP: the thesis's point-to-point baseline, and the final point-to-plane refinement
       // (PCL's loop converged to better poses on thin blades in our tests; it runs once per tool).
       pcl::IterativeClosestPoint<Point, Point> icp;
       if (options.metric == IcpMetric::kPointToPlane) icp.setTransformationEstimation(std::make_shared<DampedPointToPlane>());
+      icp.setCorrespondenceEstimation(std::make_shared<BatchedCorrespondences>(model_nn));
       icp.setInputSource(source);
       icp.setInputTarget(model);
-      // The tree over the model is built once; force_no_recompute keeps ICP from rebuilding it
-      // on every call.
-      icp.setSearchMethodTarget(model_tree, true);
+      // The correspondences search model_nn (built once per model); force_no_recompute keeps
+      // the ICP from building a kd-tree of its own that nothing would use.
+      icp.setSearchMethodTarget(std::make_shared<pcl::search::KdTree<Point>>(), true);
       icp.setMaximumIterations(iterations);
       icp.setTransformationEpsilon(options.transformation_epsilon);
       icp.setEuclideanFitnessEpsilon(options.euclidean_fitness_epsilon);
@@ -473,48 +513,46 @@ struct ModelFitter::Impl {
   }
 
   // Mean observed -> model distance for X_RT, and the unexplained visible model fraction.
-  void Score(const Eigen::Matrix3Xf& observed, const pcl::KdTreeFLANN<Point>* observed_tree,
+  void Score(const Eigen::Matrix3Xf& observed, const internal::NearestNeighbours* observed_nn,
              const std::optional<Eigen::Vector3d>& p_R_camera, const Eigen::Isometry3d& X_RT,
              const SurfaceSamples& model_samples, double& fit_error, double& unexplained) const {
     const Eigen::Isometry3d X_TR = X_RT.inverse();
-    std::vector<int> index(1);
-    std::vector<float> sq_distance(1);
-    double sum = 0.0;
+    std::vector<int> index;
+    std::vector<float> sq_distance;
+    Eigen::Matrix3Xf queries(3, observed.cols());
     for (Eigen::Index i = 0; i < observed.cols(); ++i) {
-      const Eigen::Vector3d p_T = X_TR * observed.col(i).cast<double>();
-      target_tree->nearestKSearch(MakePoint(p_T), 1, index, sq_distance);
-      sum += std::sqrt(static_cast<double>(sq_distance[0]));
+      queries.col(i) = (X_TR * observed.col(i).cast<double>()).cast<float>();
     }
+    target_nn.Find(queries, index, sq_distance);
+    double sum = 0.0;
+    for (const float d : sq_distance) sum += std::sqrt(static_cast<double>(d));
     fit_error = sum / static_cast<double>(observed.cols());
     unexplained = 0.0;
-    if (!p_R_camera || observed_tree == nullptr) return;
-    int visible = 0;
-    int missing = 0;
+    if (!p_R_camera || observed_nn == nullptr) return;
     const double limit_sq = options.visible_distance * options.visible_distance;
+    queries.resize(3, model_samples.points.cols());
+    Eigen::Index visible = 0;
     for (Eigen::Index i = 0; i < model_samples.points.cols(); ++i) {
       const Eigen::Vector3d p = X_RT * model_samples.points.col(i).cast<double>();
       const Eigen::Vector3d n = X_RT.linear() * model_samples.normals.col(i).cast<double>();
       if (n.dot(*p_R_camera - p) <= 0) continue;
-      ++visible;
-      observed_tree->nearestKSearch(MakePoint(p), 1, index, sq_distance);
-      if (sq_distance[0] > limit_sq) ++missing;
+      queries.col(visible++) = p.cast<float>();
     }
-    unexplained = visible > 0 ? static_cast<double>(missing) / visible : 0.0;
+    observed_nn->Find(queries.leftCols(visible), index, sq_distance);
+    const auto missing = std::count_if(sq_distance.begin(), sq_distance.end(), [&](float d) { return d > limit_sq; });
+    unexplained = visible > 0 ? static_cast<double>(missing) / static_cast<double>(visible) : 0.0;
   }
 
   // Mean distance observed point -> nearest model point for X_RT [m].
   double MeanDistance(const Eigen::Matrix3Xf& observed, const Eigen::Isometry3d& X_RT) const {
     const Eigen::Isometry3f X_TR = X_RT.inverse().cast<float>();
-    pcl::Indices index(1);
-    std::vector<float> sq_distance(1);
-    Point query;
-    query.getNormalVector3fMap() = Eigen::Vector3f::Zero();
+    Eigen::Matrix3Xf queries(3, observed.cols());
+    for (Eigen::Index i = 0; i < observed.cols(); ++i) queries.col(i) = X_TR * Eigen::Vector3f(observed.col(i));
+    std::vector<int> index;
+    std::vector<float> sq_distance;
+    target_nn.Find(queries, index, sq_distance);
     double sum = 0.0;
-    for (Eigen::Index i = 0; i < observed.cols(); ++i) {
-      query.getVector3fMap() = X_TR * Eigen::Vector3f(observed.col(i));
-      target_tree->nearestKSearch(query, 1, index, sq_distance);
-      sum += std::sqrt(static_cast<double>(sq_distance[0]));
-    }
+    for (const float d : sq_distance) sum += std::sqrt(static_cast<double>(d));
     return sum / static_cast<double>(std::max<Eigen::Index>(observed.cols(), 1));
   }
 
@@ -561,8 +599,7 @@ ModelFitter::ModelFitter(const toollib::ToolModel& model, const ModelFitOptions&
   impl_->frame = ComputePrincipalFrame(impl_->samples.points);
   impl_->extents = ExtentsAlong(impl_->samples.points, impl_->frame);
   impl_->target = ToPcl(impl_->samples.points, &impl_->samples.normals);
-  impl_->target_tree = std::make_shared<pcl::search::KdTree<Point>>();
-  impl_->target_tree->setInputCloud(impl_->target);
+  impl_->target_nn = internal::NearestNeighbours(impl_->samples.points);
   if (model.handle.axis.norm() > 0) impl_->handle_axis_T = model.handle.axis.normalized();
   impl_->handle_centre_T = model.handle.center;
   const Eigen::VectorXf along = impl_->handle_axis_T.cast<float>().transpose() *
@@ -625,7 +662,7 @@ ModelFitResult ModelFitter::Search(const Eigen::Matrix3Xf& p_R,
     }
   }
   const auto score = [&](FitCandidate& candidate) {
-    impl_->Score(o.coarse, p_R_camera ? &o.tree : nullptr, p_R_camera, candidate.X_RT, impl_->score_samples,
+    impl_->Score(o.coarse, p_R_camera ? &o.observed_nn : nullptr, p_R_camera, candidate.X_RT, impl_->score_samples,
                  candidate.fit_error, candidate.unexplained);
     candidate.score = candidate.fit_error + options.unexplained_weight * candidate.unexplained;
   };
@@ -738,9 +775,7 @@ ModelFitResult ModelFitter::RefineWith(const Eigen::Matrix3Xf& p_R, const std::o
         normals.col(static_cast<Eigen::Index>(k)) = impl_->samples.normals.col(visible[k]);
       }
       const Cloud::Ptr visible_model = ToPcl(points, &normals);
-      auto visible_tree = std::make_shared<pcl::search::KdTree<Point>>();
-      visible_tree->setInputCloud(visible_model);
-      const Eigen::Isometry3d X_TR = impl_->RunIcpOn(visible_model, visible_tree, source, result.X_RT.inverse(),
+      const Eigen::Isometry3d X_TR = impl_->RunIcpOn(visible_model, internal::NearestNeighbours(points), source, result.X_RT.inverse(),
                                                      iterations, loop, result.converged);
       result.X_RT = X_TR.inverse();
     }
@@ -802,7 +837,7 @@ ModelFitResult ModelFitter::RefineWith(const Eigen::Matrix3Xf& p_R, const std::o
     result.violation = impl_->ViewViolation(*view, result.X_RT, impl_->samples);
   }
   result.iterations = max_iterations;
-  impl_->Score(o.observed, p_R_camera ? &o.tree : nullptr, p_R_camera, result.X_RT, impl_->samples, result.fit_error,
+  impl_->Score(o.observed, p_R_camera ? &o.observed_nn : nullptr, p_R_camera, result.X_RT, impl_->samples, result.fit_error,
                result.unexplained);
   result.score = result.fit_error + options.unexplained_weight * result.unexplained;
   result.status = FitStatus::kOk;
