@@ -502,6 +502,8 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                 "\" noslip_iterations=\"" + std::to_string(spec.physics.noslip_iterations) +
                 "\" noslip_tolerance=\"" + Num(spec.physics.noslip_tolerance) +
                 "\" solver=\"" + spec.physics.solver + "\" jacobian=\"" + spec.physics.jacobian +
+                "\" tolerance=\"" + Num(spec.physics.tolerance) +
+                "\" iterations=\"" + std::to_string(spec.physics.iterations) +
                 "\" integrator=\"Euler\"/>");
   w.Line(1, "<size njmax=\"2000\" nconmax=\"500\"/>");
   if (spec.physics.sleep_window > 0) {

@@ -138,6 +138,8 @@ void SceneSpec::Validate() const {
   Require(physics.noslip_iterations >= 0, "physics.noslip_iterations", physics.noslip_iterations,
           ">= 0");
   Require(physics.noslip_tolerance > 0, "physics.noslip_tolerance", physics.noslip_tolerance, "> 0");
+  Require(physics.tolerance > 0, "physics.tolerance", physics.tolerance, "> 0");
+  Require(physics.iterations >= 1, "physics.iterations", physics.iterations, ">= 1");
   Require(physics.settle_time >= 0 && physics.settle_time <= 10, "physics.settle_time",
           physics.settle_time, "in [0, 10] s");
   Require(physics.sleep_window >= 0 && physics.sleep_window <= 10, "physics.sleep_window", physics.sleep_window,
@@ -208,6 +210,8 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Number("noslip_tolerance", spec.physics.noslip_tolerance);
     r.String("solver", spec.physics.solver);
     r.String("jacobian", spec.physics.jacobian);
+    r.Number("tolerance", spec.physics.tolerance);
+    r.Integer("iterations", spec.physics.iterations);
     r.Number("settle_time", spec.physics.settle_time);
     r.Number("sleep_window", spec.physics.sleep_window);
     r.Number("sleep_tolerance", spec.physics.sleep_tolerance);

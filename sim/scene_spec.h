@@ -66,6 +66,10 @@ struct PhysicsSpec {
   /// "sparse", or "auto": dense below 60 degrees of freedom, which the scene always is).
   std::string solver = "Newton";
   std::string jacobian = "auto";
+  /// The constraint solver stops when its cost improves by less than `tolerance` (> 0; MuJoCo's
+  /// default 1e-8) or after `iterations` (>= 1; MuJoCo's default 100).
+  double tolerance = 1e-8;
+  int iterations = 100;
   double settle_time = 4.0;          // longest wait for tools and ball to come to rest [s]
   /// Sleeping of resting tools and ball (sim::SleepSettings): still for sleep_window [s] (>= 0,
   /// 0 = never sleep, plain MuJoCo) within sleep_tolerance [m] (> 0), woken when a robot geom or

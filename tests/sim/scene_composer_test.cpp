@@ -171,11 +171,15 @@ TEST_F(ComposerTest, PhysicsSettingsReachTheModel) {
   spec.physics.solver = "CG";
   spec.physics.jacobian = "sparse";
   spec.physics.noslip_iterations = 7;
+  spec.physics.tolerance = 1e-6;
+  spec.physics.iterations = 40;
   World world(ComposeScene(spec, *robot_, *library_, PlanScene(spec, names_, 3, {})).mjcf, "physics");
   const mjModel* m = world.mj_model();
   EXPECT_EQ(m->opt.solver, mjSOL_CG);
   EXPECT_EQ(m->opt.jacobian, mjJAC_SPARSE);
   EXPECT_EQ(m->opt.noslip_iterations, 7);
+  EXPECT_DOUBLE_EQ(m->opt.tolerance, 1e-6);
+  EXPECT_EQ(m->opt.iterations, 40);
   EXPECT_EQ(m->opt.cone, mjCONE_ELLIPTIC);
 }
 

@@ -25,9 +25,12 @@ TEST(SceneSpecTest, EmptyObjectGivesDefaults) {
 TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
       R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},
-          "physics": {"noslip_tolerance": 1e-4, "solver": "CG", "jacobian": "sparse"}})",
+          "physics": {"noslip_tolerance": 1e-4, "solver": "CG", "jacobian": "sparse", "tolerance": 1e-6,
+                      "iterations": 50}})",
       "inline");
   EXPECT_DOUBLE_EQ(spec.physics.noslip_tolerance, 1e-4);
+  EXPECT_DOUBLE_EQ(spec.physics.tolerance, 1e-6);
+  EXPECT_EQ(spec.physics.iterations, 50);
   EXPECT_EQ(spec.physics.solver, "CG");
   EXPECT_EQ(spec.physics.jacobian, "sparse");
   EXPECT_DOUBLE_EQ(spec.rack.incline_deg, 20);
@@ -48,6 +51,10 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"noslip_tolerance": 0}})", "tol.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.noslip_tolerance")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"tolerance": -1e-6}})", "tol.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.tolerance")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"iterations": 0}})", "iter.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.iterations")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"sleep_window": -1}})", "sleep.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.sleep_window")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"wake_margin": 0}})", "wake.json"); },
