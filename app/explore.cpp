@@ -249,7 +249,8 @@ int RunExplore(const ExploreRequest& request) {
   SceneRequest scene_request;
   scene_request.seed = request.seed;
   ExploreContext ctx{LoadScene(scene_request), {}, {}, DefaultAnalyzerOptions().shape,
-                     perception::ShapeCache(DefaultShapeCacheDir())};
+                     perception::ShapeCache(DefaultShapeCacheDir(),
+                                            perception::ReadShapeSegmentations(DefaultShapeSegmentationsPath()))};
   std::regex pattern;
   try {
     pattern = std::regex(request.tools.empty() ? std::string(".*") : request.tools);

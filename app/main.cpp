@@ -92,9 +92,14 @@ int RunScene(const app::SceneRequest& request, const std::filesystem::path& save
   return 0;
 }
 
-int RunToolsList(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& scene_file) {
+int RunToolsList(const std::vector<std::filesystem::path>& dirs, const std::filesystem::path& scene_file,
+                 const std::filesystem::path& write_segmentations) {
   const sim::SceneSpec spec = sim::LoadSceneSpec(scene_file.empty() ? sim::DefaultScenePath() : scene_file);
   const auto library = app::LoadLibraries(spec, dirs);
+  if (!write_segmentations.empty()) {
+    app::WriteLibrarySegmentations(library, write_segmentations);
+    return 0;
+  }
   std::printf("%-14s %-8s %7s %7s %9s %6s %6s\n", "name", "family", "length", "mass", "handle_d", "faces", "parts");
   for (const auto& tool : library) {
     std::printf("%-14s %-8s %6.3fm %5.3fkg %7.1fmm %6ld %6zu\n", tool.name.c_str(), tool.family.c_str(),
@@ -235,6 +240,10 @@ int main(int argc, char** argv) {
                                        "outward-oriented, in metres)");
   tools->add_option("--tool-dir", list_dirs, "Extra folder of user tools; repeatable")->check(CLI::ExistingDirectory);
   tools->add_option("--scene", list_scene, "Scene file naming the library folders")->check(CLI::ExistingFile);
+  std::filesystem::path write_segmentations;
+  tools->add_option("--write-segmentations", write_segmentations,
+                    "Segment every tool's shape anew and write the segmentations to this file instead of listing "
+                    "(what assets/models/library_segmentation.json is made with; see assets/models/README.md)");
 
   app::BenchRequest bench_request;
   std::string shard = "0/1";
@@ -384,7 +393,7 @@ int main(int argc, char** argv) {
       perceive_options.user_tools_unknown = perceive_user_tools_unknown;
       return app::RunPerceive(perceive_request, perceive_out, options, perceive_options);
     }
-    if (tools->parsed()) return RunToolsList(list_dirs, list_scene);
+    if (tools->parsed()) return RunToolsList(list_dirs, list_scene, write_segmentations);
     if (train->parsed()) return app::RunTrainRecognizer(train_request);
     if (explore->parsed()) return app::RunExplore(explore_request);
     if (bench->parsed()) {

@@ -1,6 +1,8 @@
 #include "app/perceive.h"
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
@@ -287,11 +289,35 @@ std::filesystem::path DefaultShapeCacheDir() {
   return {};
 }
 
+std::filesystem::path DefaultShapeSegmentationsPath() { return AssetsDir() / "models" / "library_segmentation.json"; }
+
 perception::AnalyzerOptions DefaultAnalyzerOptions() {
   perception::AnalyzerOptions options;
   options.classifier_file = DefaultClassifierPath();
   options.shape_cache_dir = DefaultShapeCacheDir();
+  options.shape_segmentations = DefaultShapeSegmentationsPath();
   return options;
+}
+
+void WriteLibrarySegmentations(const std::vector<toollib::ToolModel>& library, const std::filesystem::path& out) {
+  const perception::ShapeOptions options = DefaultAnalyzerOptions().shape;
+  perception::ShapeSegmentations segmentations;
+  std::string failed;
+  for (const toollib::ToolModel& model : library) {
+    const auto start = std::chrono::steady_clock::now();
+    perception::ShapeSegmentation seg = perception::SegmentModelShape(model, options);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (seg.status != perception::ShapeStatus::kOk) {
+      failed += Cat(failed.empty() ? "" : "; ", model.name, ": ", seg.reason);
+      continue;
+    }
+    std::printf("%-14s %d parts, %zu samples%s (%.1f s)\n", model.name.c_str(), seg.num_labels, seg.labels.size(),
+                seg.mesh_fallback ? ", from the library mesh" : "", s);
+    segmentations.emplace(perception::ShapeCacheKey(model, options), std::move(seg));
+  }
+  if (!failed.empty()) throw std::runtime_error(Cat("segmentation failed for ", failed, "; nothing written"));
+  perception::WriteShapeSegmentations(out, segmentations);
+  std::printf("wrote %zu segmentations to %s\n", segmentations.size(), out.string().c_str());
 }
 
 int RunPerceive(const SceneRequest& request, const std::filesystem::path& out_dir, const CaptureOptions& capture_options,

@@ -75,8 +75,19 @@ std::filesystem::path DefaultClassifierPath();
 /// (memory only). The files are keyed by mesh and option hashes, so they never go stale.
 std::filesystem::path DefaultShapeCacheDir();
 
-/// The perception pipeline as the app runs it: defaults, the shipped classifier and the shape
-/// cache on disk.
+/// The shipped segmentations of the library models' shape analyses:
+/// assets/models/library_segmentation.json (perception::ShapeSegmentation).
+std::filesystem::path DefaultShapeSegmentationsPath();
+
+/// The perception pipeline as the app runs it: defaults, the shipped classifier, the shipped
+/// segmentations and the shape cache on disk.
 perception::AnalyzerOptions DefaultAnalyzerOptions();
+
+/// Segments every model of `library` anew (perception::SegmentModelShape under
+/// DefaultAnalyzerOptions().shape), one line per model on stdout, and writes the segmentations
+/// to `out` (perception::WriteShapeSegmentations): what assets/models/library_segmentation.json
+/// is made with. Throws std::runtime_error naming the models whose segmentation failed (nothing
+/// is written then) or the file that cannot be written.
+void WriteLibrarySegmentations(const std::vector<toollib::ToolModel>& library, const std::filesystem::path& out);
 
 }  // namespace toolbench::app

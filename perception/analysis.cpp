@@ -154,7 +154,9 @@ ToolAnalyzer::ToolAnalyzer(std::vector<toollib::ToolModel> library, const Analyz
   const auto start = Clock::now();
   impl_->library = std::move(library);
   impl_->options = options;
-  impl_->shapes = ShapeCache(options.shape_cache_dir);
+  impl_->shapes = ShapeCache(options.shape_cache_dir, options.shape_segmentations.empty()
+                                                         ? ShapeSegmentations{}
+                                                         : ReadShapeSegmentations(options.shape_segmentations));
   impl_->recognizer = std::make_unique<ToolRecognizer>(impl_->library, options.recognition);
   impl_->model_names = impl_->recognizer->model_names();
   if (!options.classifier_file.empty()) {

@@ -27,6 +27,10 @@ struct AnalyzerOptions {
   ShapeOptions shape;                     // parts, superquadrics and handle choice
   bool cache_shapes = true;               // analyse each library model's shape once (false: every time)
   std::filesystem::path shape_cache_dir;  // shape analyses on disk, shared by runs; empty = memory only
+  /// Recorded segmentations of the library models (ReadShapeSegmentations, e.g.
+  /// assets/models/library_segmentation.json): with them a model's analysis is the same in every
+  /// process (ShapeSegmentation says why it would not be). Empty: segment each model anew.
+  std::filesystem::path shape_segmentations;
   /// A tool is taken for the recognised library model only when the recogniser's confidence is
   /// at least min_known_confidence, in [0, 1], and the fit's mean error at most
   /// max_known_fit_error [m], > 0; otherwise it is analysed as an unknown tool from its cloud.

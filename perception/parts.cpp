@@ -379,7 +379,11 @@ double CylinderScore(const Superquadric& sq, const ShapeOptions& options) {
   return std::sqrt(r1 * r1 + r2 * r2 + len * len);
 }
 
-PartsResult SegmentParts(const SurfaceSamples& samples, const ShapeOptions& options) {
+namespace {
+
+// SegmentParts up to the labels: advancing-front reconstruction, SDF segmentation, the points the
+// reconstruction left out labelled like their nearest labelled point.
+ShapeSegmentation SegmentLabels(const SurfaceSamples& samples, const ShapeOptions& options) {
   options.Validate();
   const Eigen::Matrix3Xf& points = samples.points;
   if (samples.normals.cols() != points.cols()) {
@@ -388,7 +392,7 @@ PartsResult SegmentParts(const SurfaceSamples& samples, const ShapeOptions& opti
   }
   CheckCloud("SegmentParts", "samples.points", points);
   CheckCloud("SegmentParts", "samples.normals", samples.normals);
-  PartsResult result;
+  ShapeSegmentation result;
   if (points.cols() < kMinShapePoints) {
     result.reason = Cat("SegmentParts: ", points.cols(), " points, need at least ", kMinShapePoints);
     return result;
@@ -406,10 +410,35 @@ PartsResult SegmentParts(const SurfaceSamples& samples, const ShapeOptions& opti
     result.reason = Cat("SegmentParts: ", seg.error.empty() ? "no part left" : seg.error);
     return result;
   }
-  std::vector<int> labels = seg.vertex_labels;
-  FillLabels(points, labels);
-  result = MakeParts(points, labels, seg.num_parts, options);
+  result.labels = seg.vertex_labels;
+  FillLabels(points, result.labels);
+  result.num_labels = seg.num_parts;
   result.mesh_faces = seg.num_faces;
+  result.status = ShapeStatus::kOk;
+  return result;
+}
+
+// Whether MakeParts finds a part in these labels: some label with enough points for a superquadric.
+bool AnyPartLargeEnough(const ShapeSegmentation& s) {
+  std::vector<int> count(static_cast<std::size_t>(std::max(0, s.num_labels)), 0);
+  for (int label : s.labels) {
+    if (label >= 0 && label < s.num_labels) ++count[static_cast<std::size_t>(label)];
+  }
+  return std::any_of(count.begin(), count.end(), [](int c) { return c >= kMinSuperquadricPoints; });
+}
+
+}  // namespace
+
+PartsResult SegmentParts(const SurfaceSamples& samples, const ShapeOptions& options) {
+  const ShapeSegmentation seg = SegmentLabels(samples, options);
+  if (seg.status != ShapeStatus::kOk) {
+    PartsResult result;
+    result.status = seg.status;
+    result.reason = seg.reason;
+    return result;
+  }
+  PartsResult result = MakeParts(samples.points, seg.labels, seg.num_labels, options);
+  result.mesh_faces = seg.mesh_faces;
   return result;
 }
 
@@ -592,38 +621,67 @@ ToolFeatures ComputeFeatures(const std::vector<Part>& parts, const Handle& handl
   return f;
 }
 
-ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
+ShapeSegmentation SegmentModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
   options.Validate();
   const SurfaceSamples samples = SampleSurface(model.mesh, options.samples, DeriveSeed(options.seed, "shape_samples"));
+  ShapeSegmentation seg = SegmentLabels(samples, options);
+  if (seg.status == ShapeStatus::kOk && !AnyPartLargeEnough(seg)) {
+    seg.status = ShapeStatus::kSegmentationFailed;
+    seg.reason = "SegmentParts: no segment has enough points for a superquadric";
+  }
+  if (seg.status != ShapeStatus::kSegmentationFailed) return seg;
+  // AFSR gave nothing usable: segment the library mesh itself and label each sample by the
+  // face it was drawn from.
+  const std::vector<Eigen::Vector3i> faces = [&] {
+    std::vector<Eigen::Vector3i> out;
+    for (Eigen::Index f = 0; f < model.mesh.faces.cols(); ++f) out.push_back(model.mesh.faces.col(f));
+    return out;
+  }();
+  const internal::MeshSegmentation mesh_seg = internal::SegmentBySdf(
+      model.mesh.vertices, faces, {options.sdf_clusters, options.sdf_smoothing, options.min_part_fraction});
+  internal::Logger()->warn("{}: {}; segmenting the library mesh instead", model.name, seg.reason);
+  if (!mesh_seg.error.empty() || mesh_seg.num_parts == 0) {
+    seg.reason += Cat("; library mesh: ", mesh_seg.error);
+    return seg;
+  }
+  seg.labels.resize(samples.faces.size());
+  for (std::size_t i = 0; i < seg.labels.size(); ++i) {
+    seg.labels[i] = mesh_seg.face_labels[static_cast<std::size_t>(samples.faces[i])];
+  }
+  FillLabels(samples.points, seg.labels);
+  seg.num_labels = mesh_seg.num_parts;
+  seg.mesh_faces = mesh_seg.num_faces;
+  seg.mesh_fallback = true;
+  seg.status = ShapeStatus::kOk;
+  seg.reason.clear();
+  return seg;
+}
+
+ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options,
+                             const ShapeSegmentation& segmentation) {
+  options.Validate();
   ModelShape shape;
   shape.model = model.name;
-  PartsResult parts = SegmentParts(samples, options);
-  if (parts.status == ShapeStatus::kSegmentationFailed) {
-    // AFSR gave nothing usable: segment the library mesh itself and label each sample by the
-    // face it was drawn from.
-    const std::vector<Eigen::Vector3i> faces = [&] {
-      std::vector<Eigen::Vector3i> out;
-      for (Eigen::Index f = 0; f < model.mesh.faces.cols(); ++f) out.push_back(model.mesh.faces.col(f));
-      return out;
-    }();
-    const internal::MeshSegmentation seg = internal::SegmentBySdf(
-        model.mesh.vertices, faces, {options.sdf_clusters, options.sdf_smoothing, options.min_part_fraction});
-    internal::Logger()->warn("{}: {}; segmenting the library mesh instead", model.name, parts.reason);
-    if (seg.error.empty() && seg.num_parts > 0) {
-      std::vector<int> labels(samples.faces.size());
-      for (std::size_t i = 0; i < labels.size(); ++i) labels[i] = seg.face_labels[static_cast<std::size_t>(samples.faces[i])];
-      FillLabels(samples.points, labels);
-      parts = MakeParts(samples.points, labels, seg.num_parts, options);
-      parts.mesh_faces = seg.num_faces;
-      parts.mesh_fallback = true;
-    } else {
-      parts.reason += Cat("; library mesh: ", seg.error);
-    }
+  if (segmentation.status != ShapeStatus::kOk) {
+    shape.status = segmentation.status;
+    shape.reason = segmentation.reason;
+    shape.mesh_faces = segmentation.mesh_faces;
+    shape.mesh_fallback = segmentation.mesh_fallback;
+    return shape;
   }
+  const SurfaceSamples samples = SampleSurface(model.mesh, options.samples, DeriveSeed(options.seed, "shape_samples"));
+  if (segmentation.labels.size() != static_cast<std::size_t>(samples.points.cols()) ||
+      std::any_of(segmentation.labels.begin(), segmentation.labels.end(),
+                  [&](int label) { return label < 0 || label >= segmentation.num_labels; })) {
+    ThrowInvalid("AnalyzeModelShape: ", model.name, ": the segmentation has ", segmentation.labels.size(),
+                 " labels in [0, ", segmentation.num_labels, "), expected one in that range for each of the ",
+                 samples.points.cols(), " surface samples");
+  }
+  PartsResult parts = MakeParts(samples.points, segmentation.labels, segmentation.num_labels, options);
   shape.status = parts.status;
   shape.reason = parts.reason;
-  shape.mesh_faces = parts.mesh_faces;
-  shape.mesh_fallback = parts.mesh_fallback;
+  shape.mesh_faces = segmentation.mesh_faces;
+  shape.mesh_fallback = segmentation.mesh_fallback;
   shape.parts = std::move(parts.parts);
   if (shape.status != ShapeStatus::kOk) return shape;
   shape.handle = FinishHandle(shape.parts, options, Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX());
@@ -635,6 +693,10 @@ ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions
   }
   shape.features = ComputeFeatures(shape.parts, shape.handle, shape.X_FT);
   return shape;
+}
+
+ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
+  return AnalyzeModelShape(model, options, SegmentModelShape(model, options));
 }
 
 ModelShape TransformShape(const ModelShape& shape, const Eigen::Isometry3d& X_RF) {
@@ -723,11 +785,74 @@ std::string ShapeCacheKey(const toollib::ToolModel& model, const ShapeOptions& o
   return Cat(model.name, '-', Hex(mesh_hash), '-', Hex(Fnv1a(text.data(), text.size())));
 }
 
-ShapeCache::ShapeCache(std::filesystem::path dir) : dir_(std::move(dir)) {}
+ShapeSegmentations ReadShapeSegmentations(const std::filesystem::path& path) {
+  auto fail = [&](const auto&... what) -> std::runtime_error {
+    return std::runtime_error(Cat("shape segmentations '", path.string(), "': ", what...));
+  };
+  std::ifstream in(path);
+  if (!in) throw fail("cannot be opened");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw fail("not valid JSON (", e.what(), ")");
+  }
+  ShapeSegmentations out;
+  try {
+    if (j.at("format").get<int>() != 1) throw fail("format ", j.at("format").dump(), ", expected 1");
+    for (const auto& [key, e] : j.at("segmentations").items()) {
+      ShapeSegmentation seg;
+      seg.status = ShapeStatus::kOk;
+      seg.num_labels = e.at("num_labels").get<int>();
+      seg.mesh_faces = e.at("mesh_faces").get<int>();
+      seg.mesh_fallback = e.at("mesh_fallback").get<bool>();
+      if (seg.num_labels < 1 || seg.num_labels > 36) throw fail(key, ": num_labels ", seg.num_labels, ", expected 1..36");
+      for (char c : e.at("labels").get<std::string>()) {
+        const int label = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'z' ? c - 'a' + 10 : -1;
+        if (label < 0 || label >= seg.num_labels) throw fail(key, ": label '", c, "' is not in [0, ", seg.num_labels, ")");
+        seg.labels.push_back(label);
+      }
+      out.emplace(key, std::move(seg));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw fail("a field is missing or has the wrong type (", e.what(), ")");
+  }
+  return out;
+}
+
+void WriteShapeSegmentations(const std::filesystem::path& path, const ShapeSegmentations& segmentations) {
+  nlohmann::json j;
+  j["format"] = 1;
+  j["segmentations"] = nlohmann::json::object();
+  for (const auto& [key, seg] : segmentations) {
+    if (seg.status != ShapeStatus::kOk || seg.num_labels < 1 || seg.num_labels > 36) {
+      ThrowInvalid("WriteShapeSegmentations: ", key, ": status ", static_cast<int>(seg.status), ", ", seg.num_labels,
+                   " labels (expected a kOk segmentation of 1..36 labels)");
+    }
+    std::string labels;
+    labels.reserve(seg.labels.size());
+    for (int label : seg.labels) {
+      if (label < 0 || label >= seg.num_labels) ThrowInvalid("WriteShapeSegmentations: ", key, ": label ", label, " out of range");
+      labels.push_back(static_cast<char>(label < 10 ? '0' + label : 'a' + label - 10));
+    }
+    j["segmentations"][key] = {{"num_labels", seg.num_labels},
+                               {"mesh_faces", seg.mesh_faces},
+                               {"mesh_fallback", seg.mesh_fallback},
+                               {"labels", labels}};
+  }
+  std::ofstream out(path);
+  out << j.dump(1) << '\n';
+  if (!out) throw std::runtime_error(Cat("WriteShapeSegmentations: cannot write '", path.string(), "'"));
+}
+
+ShapeCache::ShapeCache(std::filesystem::path dir, ShapeSegmentations segmentations)
+    : dir_(std::move(dir)), segmentations_(std::move(segmentations)) {}
 
 const ModelShape& ShapeCache::Get(const toollib::ToolModel& model, const ShapeOptions& options) {
   options.Validate();
-  const std::string key = ShapeCacheKey(model, options);
+  const std::string model_key = ShapeCacheKey(model, options);
+  const auto recorded = segmentations_.find(model_key);
+  const std::string key = recorded != segmentations_.end() ? model_key + "-seg" : model_key;
   if (const auto it = memory_.find(key); it != memory_.end()) {
     ++memory_hits_;
     return it->second;
@@ -746,7 +871,12 @@ const ModelShape& ShapeCache::Get(const toollib::ToolModel& model, const ShapeOp
     }
   }
   ++misses_;
-  const ModelShape& shape = memory_.emplace(key, AnalyzeModelShape(model, options)).first->second;
+  if (recorded != segmentations_.end()) ++recorded_;
+  const ModelShape& shape =
+      memory_
+          .emplace(key, recorded != segmentations_.end() ? AnalyzeModelShape(model, options, recorded->second)
+                                                          : AnalyzeModelShape(model, options))
+          .first->second;
   if (!file.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(dir_, ec);

@@ -126,6 +126,46 @@ ToolFeatures ComputeFeatures(const std::vector<Part>& parts, const Handle& handl
 /// bad options or a mesh that cannot be sampled.
 ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options);
 
+/// Which part each of AnalyzeModelShape's surface samples of a library mesh belongs to: the one
+/// step of the analysis that a process cannot repeat. CGAL's advancing-front reconstruction orders
+/// equally good border edges by their address in memory, so its surface, and the SDF parts on it,
+/// can differ by a few faces with the process's allocation history; everything after the labels
+/// (superquadrics, handle, features) is a function of them. A recorded segmentation
+/// (ShapeCache's `segmentations`, assets/models/library_segmentation.json) gives every process on
+/// every machine the same analysis of a library model.
+struct ShapeSegmentation {
+  ShapeStatus status = ShapeStatus::kTooFewPoints;  // kOk, else why there are no labels
+  std::string reason;          // empty when kOk
+  std::vector<int> labels;     // per sample, in SampleSurface's order, each in [0, num_labels)
+  int num_labels = 0;
+  int mesh_faces = 0;          // see PartsResult
+  bool mesh_fallback = false;  // see PartsResult
+};
+
+/// The first half of AnalyzeModelShape: sampling and SegmentParts' labels (with its fallback to
+/// the library mesh's own SDF segmentation when the reconstruction gives no usable part).
+/// Throws like AnalyzeModelShape.
+ShapeSegmentation SegmentModelShape(const toollib::ToolModel& model, const ShapeOptions& options);
+
+/// The second half: the parts, superquadrics, handle and features of `model` from a segmentation
+/// of its samples (SegmentModelShape under the same options, perhaps in another process). A failed
+/// segmentation gives its status and reason. Throws std::invalid_argument naming the model when
+/// the labels do not fit the samples (count, range), and like AnalyzeModelShape.
+ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options,
+                             const ShapeSegmentation& segmentation);
+
+/// Recorded segmentations of library models, by ShapeCacheKey (model name, mesh and options
+/// hashes: a changed mesh or option never picks up a stale one).
+using ShapeSegmentations = std::map<std::string, ShapeSegmentation>;
+
+/// Reads / writes a segmentations file (JSON: format, then per key num_labels, mesh_faces,
+/// mesh_fallback and the labels as one base-36 digit each). Read throws std::runtime_error
+/// naming the file and what is wrong with it (missing, not JSON, a field missing or out of
+/// range); write throws std::runtime_error naming the file when it cannot be written, and
+/// std::invalid_argument for a segmentation that is not kOk or has more than 36 labels.
+ShapeSegmentations ReadShapeSegmentations(const std::filesystem::path& path);
+void WriteShapeSegmentations(const std::filesystem::path& path, const ShapeSegmentations& segmentations);
+
 /// Moves a shape from its frame F into R given X_RF (e.g. a model's shape in T with the fitted
 /// X_RT): part points, superquadric poses, the handle and X_FT. Features stay in T.
 ModelShape TransformShape(const ModelShape& shape, const Eigen::Isometry3d& X_RF);
@@ -151,8 +191,11 @@ std::string ShapeCacheKey(const toollib::ToolModel& model, const ShapeOptions& o
 /// mesh or option never reads a stale file. Not thread-safe.
 class ShapeCache {
  public:
-  /// `dir` empty: memory only. Otherwise the folder is created when first written.
-  explicit ShapeCache(std::filesystem::path dir = {});
+  /// `dir` empty: memory only. Otherwise the folder is created when first written. A model with a
+  /// recorded segmentation in `segmentations` (same key) is analysed from it, never segmented
+  /// anew; its file in `dir` has "-seg" appended to the key, so analyses segmented anew (by an
+  /// earlier version, or for models without a record) are not taken for it.
+  explicit ShapeCache(std::filesystem::path dir = {}, ShapeSegmentations segmentations = {});
 
   /// The analysis of `model` under `options`: from memory, else from disk, else computed (and
   /// stored in both). The reference stays valid as long as the cache lives. Throws like
@@ -162,13 +205,16 @@ class ShapeCache {
   int memory_hits() const { return memory_hits_; }  // Get calls answered from memory
   int disk_hits() const { return disk_hits_; }      // Get calls answered from a file
   int misses() const { return misses_; }            // Get calls that ran the analysis
+  int recorded() const { return recorded_; }        // of the misses, those from a recorded segmentation
 
  private:
   std::filesystem::path dir_;
+  ShapeSegmentations segmentations_;
   std::map<std::string, ModelShape> memory_;
   int memory_hits_ = 0;
   int disk_hits_ = 0;
   int misses_ = 0;
+  int recorded_ = 0;
 };
 
 /// Writes an ASCII PLY of coloured points (x y z as float, red green blue as uchar) for

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <stdexcept>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -50,13 +52,26 @@ void WriteDebug(const std::filesystem::path& dir, const ModelShape& shape) {
   cv::imwrite((dir / (shape.model + "_parts.png")).string(), image);
 }
 
+const ShapeSegmentations& Recorded() {
+  static const ShapeSegmentations recorded = ReadShapeSegmentations(AssetsDir() / "models" / "library_segmentation.json");
+  return recorded;
+}
+
+// Every library tool's shipped segmentation matches its mesh and the default options (else the
+// file is stale: remake it as assets/models/README.md says), and the analysis from it finds the
+// handle the sidecar declares. This is the analysis every episode uses.
 TEST(ShapeLibraryTest, HandleIsTheSidecarHandleForEveryTool) {
   const char* debug_dir = std::getenv("TOOLBENCH_SHAPE_DEBUG_DIR");
   ASSERT_FALSE(Library().empty());
   int correct = 0;
   for (const toollib::ToolModel& model : Library()) {
+    const auto recorded = Recorded().find(ShapeCacheKey(model, {}));
+    ASSERT_NE(recorded, Recorded().end())
+        << model.name << " has no segmentation for its mesh and the default options in "
+        << "assets/models/library_segmentation.json: run build/toolbench tools --write-segmentations "
+        << "assets/models/library_segmentation.json";
     const auto start = std::chrono::steady_clock::now();
-    const ModelShape shape = AnalyzeModelShape(model, {});
+    const ModelShape shape = AnalyzeModelShape(model, {}, recorded->second);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (debug_dir != nullptr) WriteDebug(debug_dir, shape);
     std::printf("%-10s status %d parts %zu faces %5d fallback %d handle %d: centre err %5.1f mm, axis.z %.3f, "
@@ -132,6 +147,114 @@ TEST(ShapeCacheTest, HitsReturnIdenticalDataAndChangedOptionsMiss) {
   toollib::ToolModel moved = hoe;
   moved.mesh.vertices(0, 0) += 1e-4;
   EXPECT_NE(ShapeCacheKey(moved, ShapeOptions{}), ShapeCacheKey(hoe, ShapeOptions{}));
+  std::filesystem::remove_all(dir);
+}
+
+// The analysis splits into the segmentation (which a process cannot repeat exactly) and the rest,
+// a function of the labels: the same labels give the same analysis, bit for bit, and a freshly
+// segmented analysis finds the same handle within the reconstruction's variation.
+TEST(ShapeSegmentationTest, SameLabelsGiveTheSameAnalysis) {
+  const toollib::ToolModel& hoe = Tool("hoe_1");
+  const ShapeSegmentation seg = SegmentModelShape(hoe, {});
+  ASSERT_EQ(seg.status, ShapeStatus::kOk) << seg.reason;
+  ASSERT_EQ(seg.labels.size(), 4000u);
+  const ModelShape a = AnalyzeModelShape(hoe, {}, seg);
+  const ModelShape b = AnalyzeModelShape(hoe, {}, seg);
+  ExpectSameShape(a, b);
+  const ModelShape recorded = AnalyzeModelShape(hoe, {}, Recorded().at(ShapeCacheKey(hoe, {})));
+  EXPECT_LT((recorded.handle.center - a.handle.center).norm(), 0.002);
+  EXPECT_GT(recorded.handle.axis.dot(a.handle.axis), std::cos(2.0 * M_PI / 180));
+
+  // Labels that do not fit the samples are refused, naming the model.
+  ShapeSegmentation short_seg = seg;
+  short_seg.labels.pop_back();
+  EXPECT_THROW(
+      {
+        try {
+          AnalyzeModelShape(hoe, {}, short_seg);
+        } catch (const std::invalid_argument& e) {
+          EXPECT_NE(std::string(e.what()).find("hoe_1"), std::string::npos) << e.what();
+          throw;
+        }
+      },
+      std::invalid_argument);
+  ShapeSegmentation out_of_range = seg;
+  out_of_range.labels[7] = seg.num_labels;
+  EXPECT_THROW(AnalyzeModelShape(hoe, {}, out_of_range), std::invalid_argument);
+  // A failed segmentation is a result with its reason.
+  ShapeSegmentation failed;
+  failed.status = ShapeStatus::kSegmentationFailed;
+  failed.reason = "no surface";
+  const ModelShape none = AnalyzeModelShape(hoe, {}, failed);
+  EXPECT_EQ(none.status, ShapeStatus::kSegmentationFailed);
+  EXPECT_EQ(none.reason, "no surface");
+}
+
+// A cache given the recorded segmentations analyses a model from its record (not anew), under a
+// key of its own on disk, and a second process reads that file.
+TEST(ShapeSegmentationTest, CacheAnalysesFromTheRecord) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "toolbench_shape_seg_cache_test";
+  std::filesystem::remove_all(dir);
+  const toollib::ToolModel& hoe = Tool("hoe_1");
+  ShapeCache cache(dir, Recorded());
+  const ModelShape first = cache.Get(hoe, {});
+  EXPECT_EQ(cache.misses(), 1);
+  EXPECT_EQ(cache.recorded(), 1);
+  ExpectSameShape(first, AnalyzeModelShape(hoe, {}, Recorded().at(ShapeCacheKey(hoe, {}))));
+  EXPECT_TRUE(std::filesystem::exists(dir / (ShapeCacheKey(hoe, {}) + "-seg.json")));
+  ShapeCache again(dir, Recorded());
+  ExpectSameShape(first, again.Get(hoe, {}));
+  EXPECT_EQ(again.disk_hits(), 1);
+  // Without the record, the same folder does not answer with the recorded analysis.
+  ShapeCache unrecorded(dir);
+  unrecorded.Get(hoe, {});
+  EXPECT_EQ(unrecorded.misses(), 1);
+  EXPECT_EQ(unrecorded.recorded(), 0);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ShapeSegmentationTest, FileRoundTripsAndBadFilesAreNamed) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "toolbench_shape_seg_file_test";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  ShapeSegmentations written;
+  ShapeSegmentation seg;
+  seg.status = ShapeStatus::kOk;
+  seg.num_labels = 12;
+  seg.labels = {0, 11, 3, 3, 10};
+  seg.mesh_faces = 77;
+  seg.mesh_fallback = true;
+  written["tool-a"] = seg;
+  WriteShapeSegmentations(dir / "s.json", written);
+  const ShapeSegmentations read = ReadShapeSegmentations(dir / "s.json");
+  ASSERT_EQ(read.size(), 1u);
+  EXPECT_EQ(read.at("tool-a").labels, seg.labels);
+  EXPECT_EQ(read.at("tool-a").num_labels, 12);
+  EXPECT_EQ(read.at("tool-a").mesh_faces, 77);
+  EXPECT_TRUE(read.at("tool-a").mesh_fallback);
+  EXPECT_EQ(read.at("tool-a").status, ShapeStatus::kOk);
+
+  auto expect_named = [&](const std::string& text, const std::string& what) {
+    const std::filesystem::path file = dir / "bad.json";
+    std::ofstream(file) << text;
+    try {
+      ReadShapeSegmentations(file);
+      ADD_FAILURE() << "no error for " << text;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  expect_named("{\"format\": 1, \"segm", "not valid JSON");
+  expect_named(R"({"format": 2, "segmentations": {}})", "format");
+  expect_named(R"({"format": 1, "segmentations": {"t": {"num_labels": 2, "mesh_faces": 1, "mesh_fallback": false}}})",
+               "missing");
+  expect_named(R"({"format": 1, "segmentations": {"t": {"num_labels": 2, "mesh_faces": 1, "mesh_fallback": false,
+                 "labels": "0120"}}})",
+               "label '2'");
+  EXPECT_THROW(ReadShapeSegmentations(dir / "missing.json"), std::runtime_error);
+  seg.status = ShapeStatus::kSegmentationFailed;
+  EXPECT_THROW(WriteShapeSegmentations(dir / "t.json", {{"tool-b", seg}}), std::invalid_argument);
   std::filesystem::remove_all(dir);
 }
 
