@@ -517,16 +517,11 @@ struct ModelFitter::Impl {
              const std::optional<Eigen::Vector3d>& p_R_camera, const Eigen::Isometry3d& X_RT,
              const SurfaceSamples& model_samples, double& fit_error, double& unexplained) const {
     const Eigen::Isometry3d X_TR = X_RT.inverse();
-    std::vector<int> index;
-    std::vector<float> sq_distance;
     Eigen::Matrix3Xf queries(3, observed.cols());
     for (Eigen::Index i = 0; i < observed.cols(); ++i) {
       queries.col(i) = (X_TR * observed.col(i).cast<double>()).cast<float>();
     }
-    target_nn.Find(queries, index, sq_distance);
-    double sum = 0.0;
-    for (const float d : sq_distance) sum += std::sqrt(static_cast<double>(d));
-    fit_error = sum / static_cast<double>(observed.cols());
+    fit_error = MeanDistanceToModel(queries);
     unexplained = 0.0;
     if (!p_R_camera || observed_nn == nullptr) return;
     const double limit_sq = options.visible_distance * options.visible_distance;
@@ -538,6 +533,8 @@ struct ModelFitter::Impl {
       if (n.dot(*p_R_camera - p) <= 0) continue;
       queries.col(visible++) = p.cast<float>();
     }
+    std::vector<int> index;
+    std::vector<float> sq_distance;
     observed_nn->Find(queries.leftCols(visible), index, sq_distance);
     const auto missing = std::count_if(sq_distance.begin(), sq_distance.end(), [&](float d) { return d > limit_sq; });
     unexplained = visible > 0 ? static_cast<double>(missing) / static_cast<double>(visible) : 0.0;
@@ -548,12 +545,17 @@ struct ModelFitter::Impl {
     const Eigen::Isometry3f X_TR = X_RT.inverse().cast<float>();
     Eigen::Matrix3Xf queries(3, observed.cols());
     for (Eigen::Index i = 0; i < observed.cols(); ++i) queries.col(i) = X_TR * Eigen::Vector3f(observed.col(i));
+    return MeanDistanceToModel(queries);
+  }
+
+  // Mean distance from points in T (3 x N) to their nearest model samples [m]; 0 for no points.
+  double MeanDistanceToModel(const Eigen::Matrix3Xf& p_T) const {
     std::vector<int> index;
     std::vector<float> sq_distance;
-    target_nn.Find(queries, index, sq_distance);
+    target_nn.Find(p_T, index, sq_distance);
     double sum = 0.0;
     for (const float d : sq_distance) sum += std::sqrt(static_cast<double>(d));
-    return sum / static_cast<double>(std::max<Eigen::Index>(observed.cols(), 1));
+    return sum / static_cast<double>(std::max<Eigen::Index>(p_T.cols(), 1));
   }
 
   // Fraction of the camera-facing samples that the depth image contradicts at pose X_RT: the

@@ -621,9 +621,16 @@ ToolFeatures ComputeFeatures(const std::vector<Part>& parts, const Handle& handl
   return f;
 }
 
-ShapeSegmentation SegmentModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
-  options.Validate();
-  const SurfaceSamples samples = SampleSurface(model.mesh, options.samples, DeriveSeed(options.seed, "shape_samples"));
+namespace {
+
+// The surface samples every analysis of a library model starts from (seeded: the same each time).
+SurfaceSamples ModelSamples(const toollib::ToolModel& model, const ShapeOptions& options) {
+  return SampleSurface(model.mesh, options.samples, DeriveSeed(options.seed, "shape_samples"));
+}
+
+// SegmentModelShape on samples already drawn.
+ShapeSegmentation SegmentModelSamples(const toollib::ToolModel& model, const SurfaceSamples& samples,
+                                      const ShapeOptions& options) {
   ShapeSegmentation seg = SegmentLabels(samples, options);
   if (seg.status == ShapeStatus::kOk && !AnyPartLargeEnough(seg)) {
     seg.status = ShapeStatus::kSegmentationFailed;
@@ -657,9 +664,9 @@ ShapeSegmentation SegmentModelShape(const toollib::ToolModel& model, const Shape
   return seg;
 }
 
-ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options,
-                             const ShapeSegmentation& segmentation) {
-  options.Validate();
+// AnalyzeModelShape(model, options, segmentation) on samples already drawn.
+ModelShape AnalyzeModelSamples(const toollib::ToolModel& model, const SurfaceSamples& samples,
+                               const ShapeOptions& options, const ShapeSegmentation& segmentation) {
   ModelShape shape;
   shape.model = model.name;
   if (segmentation.status != ShapeStatus::kOk) {
@@ -669,7 +676,6 @@ ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions
     shape.mesh_fallback = segmentation.mesh_fallback;
     return shape;
   }
-  const SurfaceSamples samples = SampleSurface(model.mesh, options.samples, DeriveSeed(options.seed, "shape_samples"));
   if (segmentation.labels.size() != static_cast<std::size_t>(samples.points.cols()) ||
       std::any_of(segmentation.labels.begin(), segmentation.labels.end(),
                   [&](int label) { return label < 0 || label >= segmentation.num_labels; })) {
@@ -695,8 +701,23 @@ ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions
   return shape;
 }
 
+}  // namespace
+
+ShapeSegmentation SegmentModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
+  options.Validate();
+  return SegmentModelSamples(model, ModelSamples(model, options), options);
+}
+
+ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options,
+                             const ShapeSegmentation& segmentation) {
+  options.Validate();
+  return AnalyzeModelSamples(model, ModelSamples(model, options), options, segmentation);
+}
+
 ModelShape AnalyzeModelShape(const toollib::ToolModel& model, const ShapeOptions& options) {
-  return AnalyzeModelShape(model, options, SegmentModelShape(model, options));
+  options.Validate();
+  const SurfaceSamples samples = ModelSamples(model, options);
+  return AnalyzeModelSamples(model, samples, options, SegmentModelSamples(model, samples, options));
 }
 
 ModelShape TransformShape(const ModelShape& shape, const Eigen::Isometry3d& X_RF) {
