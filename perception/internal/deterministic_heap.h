@@ -22,8 +22,10 @@ namespace toolbench::perception::internal {
 /// time; not copyable.
 class DeterministicHeap {
  public:
-  /// Reserves `reserve_bytes` (> 0) of address space; throws std::runtime_error when the system
-  /// refuses, std::logic_error when the thread already has a heap.
+  /// Reserves `reserve_bytes` of address space (a reconstruction of ~4000 points uses ~12 MB);
+  /// when the system refuses, less, down to 64 MiB, and with none every allocation falls back
+  /// (overflowed()). Throws std::invalid_argument when reserve_bytes is 0, std::logic_error when
+  /// the thread already has a heap.
   explicit DeterministicHeap(std::size_t reserve_bytes = std::size_t{1} << 30);
   ~DeterministicHeap();
   DeterministicHeap(const DeterministicHeap&) = delete;
