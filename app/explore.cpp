@@ -248,9 +248,12 @@ int RunExplore(const ExploreRequest& request) {
   request.Validate();
   SceneRequest scene_request;
   scene_request.seed = request.seed;
-  ExploreContext ctx{LoadScene(scene_request), {}, {}, DefaultAnalyzerOptions().shape,
-                     perception::ShapeCache(DefaultShapeCacheDir(),
-                                            perception::ReadShapeSegmentations(DefaultShapeSegmentationsPath()))};
+  // The library's analyses as an episode's perception makes them: its shape options, cache and
+  // recorded segmentation.
+  const perception::AnalyzerOptions analyzer = DefaultAnalyzerOptions();
+  ExploreContext ctx{LoadScene(scene_request), {}, {}, analyzer.shape,
+                     perception::ShapeCache(analyzer.shape_cache_dir,
+                                            perception::ReadShapeSegmentations(analyzer.shape_segmentations))};
   std::regex pattern;
   try {
     pattern = std::regex(request.tools.empty() ? std::string(".*") : request.tools);
