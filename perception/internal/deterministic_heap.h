@@ -31,7 +31,8 @@ class DeterministicHeap {
   DeterministicHeap(const DeterministicHeap&) = delete;
   DeterministicHeap& operator=(const DeterministicHeap&) = delete;
 
-  /// While alive, the thread's `operator new` is served by `heap` (nesting is not allowed).
+  /// While alive, the thread's `operator new` is served by `heap`. Throws std::logic_error when
+  /// `heap` is another thread's or a scope is already open on this thread.
   class Scope {
    public:
     explicit Scope(DeterministicHeap& heap);
