@@ -276,6 +276,9 @@ nlohmann::json FrameAnalysisJson(const perception::FrameAnalysis& frame) {
 
 std::filesystem::path DefaultClassifierPath() { return AssetsDir() / "models" / "tool_classifier.yml.gz"; }
 
+namespace {
+
+// DefaultAnalyzerOptions' shape cache directory (see its comment).
 std::filesystem::path DefaultShapeCacheDir() {
   if (const char* dir = std::getenv("TOOLBENCH_CACHE_DIR"); dir != nullptr && *dir != 0) {
     return std::filesystem::path(dir) / "shapes";
@@ -289,13 +292,13 @@ std::filesystem::path DefaultShapeCacheDir() {
   return {};
 }
 
-std::filesystem::path DefaultShapeSegmentationsPath() { return AssetsDir() / "models" / "library_segmentation.json"; }
+}  // namespace
 
 perception::AnalyzerOptions DefaultAnalyzerOptions() {
   perception::AnalyzerOptions options;
   options.classifier_file = DefaultClassifierPath();
   options.shape_cache_dir = DefaultShapeCacheDir();
-  options.shape_segmentations = DefaultShapeSegmentationsPath();
+  options.shape_segmentations = AssetsDir() / "models" / "library_segmentation.json";
   return options;
 }
 

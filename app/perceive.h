@@ -70,17 +70,12 @@ nlohmann::json FrameAnalysisJson(const perception::FrameAnalysis& frame);
 /// The shipped classifier: assets/models/tool_classifier.yml.gz.
 std::filesystem::path DefaultClassifierPath();
 
-/// Where shape analyses of library models are kept between runs: $TOOLBENCH_CACHE_DIR/shapes,
-/// else $XDG_CACHE_HOME/toolbench/shapes, else $HOME/.cache/toolbench/shapes, else empty
-/// (memory only). The files are keyed by mesh and option hashes, so they never go stale.
-std::filesystem::path DefaultShapeCacheDir();
-
-/// The shipped segmentations of the library models' shape analyses:
-/// assets/models/library_segmentation.json (perception::ShapeSegmentation).
-std::filesystem::path DefaultShapeSegmentationsPath();
-
 /// The perception pipeline as the app runs it: defaults, the shipped classifier, the shipped
-/// segmentations and the shape cache on disk.
+/// segmentations of the library models' shape analyses (assets/models/library_segmentation.json,
+/// perception::ShapeSegmentation) and the shape cache on disk, where analyses of library models
+/// are kept between runs: $TOOLBENCH_CACHE_DIR/shapes, else $XDG_CACHE_HOME/toolbench/shapes,
+/// else $HOME/.cache/toolbench/shapes, else none (memory only). The cache's files are keyed by
+/// mesh and option hashes, so they never go stale.
 perception::AnalyzerOptions DefaultAnalyzerOptions();
 
 /// Segments every model of `library` anew (perception::SegmentModelShape under
