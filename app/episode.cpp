@@ -280,6 +280,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     const sim::PhysicsStats physics = world.physics_stats() - physics_start;
     stage.physics_ms = 1000.0 * physics.wall_s;
     stage.steps = physics.steps;
+    stage.noslip_steps = physics.noslip_steps;
     if (physics.steps > 0) {
       stage.mean_contacts = static_cast<double>(physics.contacts) / physics.steps;
       stage.mean_constraint_rows = static_cast<double>(physics.constraint_rows) / physics.steps;
@@ -946,6 +947,7 @@ nlohmann::json EpisodeJson(const EpisodeResult& r) {
                            {"mean_contacts", s.mean_contacts},
                            {"mean_constraint_rows", s.mean_constraint_rows},
                            {"mean_solver_iterations", s.mean_solver_iterations},
+                           {"noslip_steps", s.noslip_steps},
                            {"details", s.details}});
   }
   j["truth"] = r.truth;

@@ -56,7 +56,8 @@ struct StageRecord {
   long steps = 0;
   double mean_contacts = 0.0;
   double mean_constraint_rows = 0.0;
-  double mean_solver_iterations = 0.0;  // constraint solver + noslip iterations per step (PhysicsStats)
+  double mean_solver_iterations = 0.0;  // constraint solver (+ noslip, when on) iterations per step (PhysicsStats)
+  long noslip_steps = 0;                // steps that ran the noslip pass (PhysicsSpec::noslip_scope)
   nlohmann::json details = nlohmann::json::object();
 };
 

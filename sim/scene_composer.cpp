@@ -506,10 +506,17 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                 "\" iterations=\"" + std::to_string(spec.physics.iterations) +
                 "\" integrator=\"Euler\"/>");
   w.Line(1, "<size njmax=\"2000\" nconmax=\"500\"/>");
-  if (spec.physics.sleep_window > 0) {
-    // Read by sim::World (SleepSettings); other MuJoCo programs ignore it and run plain physics.
-    w.Line(1, "<custom><numeric name=\"toolbench_sleep\" data=\"" + Num(spec.physics.sleep_window) + " " +
-                  Num(spec.physics.sleep_tolerance) + " " + Num(spec.physics.wake_margin) + "\"/></custom>");
+  // Read by sim::World (SleepSettings, PhysicsSpec::noslip_scope); other MuJoCo programs ignore
+  // them and run plain physics (the noslip pass at every step).
+  const bool noslip_on_demand = spec.physics.noslip_scope == "resting" && spec.physics.noslip_iterations > 0;
+  if (spec.physics.sleep_window > 0 || noslip_on_demand) {
+    w.Line(1, "<custom>");
+    if (spec.physics.sleep_window > 0) {
+      w.Line(2, "<numeric name=\"toolbench_sleep\" data=\"" + Num(spec.physics.sleep_window) + " " +
+                    Num(spec.physics.sleep_tolerance) + " " + Num(spec.physics.wake_margin) + "\"/>");
+    }
+    if (noslip_on_demand) w.Line(2, "<text name=\"toolbench_noslip_fixtures\" data=\"rack_\"/>");
+    w.Line(1, "</custom>");
   }
   // Pinned extent: znear/zfar scale with it (measured.md C.2 #5), so the depth conversion must not
   // change with the tools on the rack.
@@ -524,16 +531,19 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
 
   w.Line(1, "<default>");
   w.Line(2, "<default class=\"robot_visual\"><geom contype=\"0\" conaffinity=\"0\" group=\"1\" density=\"0\"/></default>");
-  w.Line(2, "<default class=\"robot_collision\"><geom contype=\"1\" conaffinity=\"0\" group=\"3\" density=\"0\" condim=\"4\" friction=\"1.2 0.01 0.001\" rgba=\"0.4 0.6 0.9 0.5\"/></default>");
+  // The robot's contact impedance: MuJoCo's default, or stiffer so that a held tool does not
+  // creep without the noslip pass (PhysicsSpec::robot_solimp).
+  w.Line(2, "<default class=\"robot_collision\"><geom contype=\"1\" conaffinity=\"0\" group=\"3\" density=\"0\" condim=\"4\" friction=\"1.2 0.01 0.001\" solimp=\"" +
+                Vec(spec.physics.robot_solimp) + "\" solmix=\"" + Num(spec.physics.robot_solmix) + "\" rgba=\"0.4 0.6 0.9 0.5\"/></default>");
   w.Line(2, "<default class=\"world\"><geom contype=\"1\" conaffinity=\"1\" group=\"0\" friction=\"0.8 0.005 0.0001\"/></default>");
   w.Line(2, "<default class=\"tool_visual\"><geom contype=\"0\" conaffinity=\"0\" group=\"0\" density=\"0\"/></default>");
   // Tools: sliding and torsional friction (condim 4), no rolling friction of their own; the
   // rubber-covered rack adds it (condim 6 on its geoms, the larger condim of a pair wins). The
-  // noslip pass that keeps a grasp from creeping costs about the square of the friction rows, and
-  // tools resting on the rack and fingers on a handle make most of them. Episode seed 3 stepped
-  // at ~680 us with condim 6 everywhere, ~450 us like this, ~330 us with condim 4 on the rack too,
-  // but then spatula_3 crept down the rack at 0.55 mm/s (WorldTest.ToolsAndBallStayPutAtRest).
-  // pull-gt and grasp-gt kept their success (session-7 note).
+  // noslip pass costs about the square of the friction rows, and tools resting on the rack and
+  // fingers on a handle make most of them. Episode seed 3 stepped, with 30 noslip iterations at
+  // every step, at ~680 us with condim 6 everywhere, ~450 us like this, ~330 us with condim 4 on
+  // the rack too, but then spatula_3 crept down the rack at 0.55 mm/s
+  // (WorldTest.ToolsAndBallStayPutAtRest). pull-gt and grasp-gt kept their success (session-7 note).
   w.Line(2, "<default class=\"tool_collision\"><geom contype=\"1\" conaffinity=\"1\" group=\"3\" condim=\"4\" friction=\"1.0 0.01 0.002\" rgba=\"0.9 0.6 0.2 0.5\"/></default>");
   w.Line(2, "<default class=\"frame\"><site size=\"0.005\" group=\"5\" rgba=\"1 0 0 1\"/></default>");
   w.Line(1, "</default>");

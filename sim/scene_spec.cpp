@@ -132,12 +132,19 @@ void SceneSpec::Validate() const {
   Require(physics.timestep > 0 && physics.timestep <= 0.01, "physics.timestep", physics.timestep,
           "in (0, 0.01] s");
   RequireOneOf("physics.cone", physics.cone, {"elliptic", "pyramidal"});
+  RequireOneOf("physics.noslip_scope", physics.noslip_scope, {"always", "resting"});
   RequireOneOf("physics.solver", physics.solver, {"Newton", "CG", "PGS"});
   RequireOneOf("physics.jacobian", physics.jacobian, {"auto", "dense", "sparse"});
   Require(physics.impratio >= 1, "physics.impratio", physics.impratio, ">= 1");
   Require(physics.noslip_iterations >= 0, "physics.noslip_iterations", physics.noslip_iterations,
           ">= 0");
   Require(physics.noslip_tolerance > 0, "physics.noslip_tolerance", physics.noslip_tolerance, "> 0");
+  for (int i = 0; i < 2; ++i) {
+    Require(physics.robot_solimp[i] > 0 && physics.robot_solimp[i] < 1, "physics.robot_solimp",
+            physics.robot_solimp[i], "d0 and dwidth in (0, 1)");
+  }
+  Require(physics.robot_solimp[2] > 0, "physics.robot_solimp", physics.robot_solimp[2], "width > 0 m");
+  Require(physics.robot_solmix > 0, "physics.robot_solmix", physics.robot_solmix, "> 0");
   Require(physics.tolerance > 0, "physics.tolerance", physics.tolerance, "> 0");
   Require(physics.iterations >= 1, "physics.iterations", physics.iterations, ">= 1");
   Require(physics.settle_time >= 0 && physics.settle_time <= 10, "physics.settle_time",
@@ -208,6 +215,9 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Number("impratio", spec.physics.impratio);
     r.Integer("noslip_iterations", spec.physics.noslip_iterations);
     r.Number("noslip_tolerance", spec.physics.noslip_tolerance);
+    r.String("noslip_scope", spec.physics.noslip_scope);
+    r.Vector<3>("robot_solimp", spec.physics.robot_solimp);
+    r.Number("robot_solmix", spec.physics.robot_solmix);
     r.String("solver", spec.physics.solver);
     r.String("jacobian", spec.physics.jacobian);
     r.Number("tolerance", spec.physics.tolerance);

@@ -60,8 +60,23 @@ struct PhysicsSpec {
   double timestep = 0.002;           // [s], (0, 0.01]
   std::string cone = "elliptic";     // "pyramidal" or "elliptic"
   double impratio = 10.0;            // >= 1
-  int noslip_iterations = 30;        // >= 0; removes the creep of soft contacts (mujoco#3328)
-  double noslip_tolerance = 1e-6;    // > 0; the noslip pass stops below this improvement (MuJoCo's default)
+  /// MuJoCo's noslip pass (>= 0 iterations; 0 = off) removes the creep of soft contacts
+  /// (mujoco#3328) but costs ~60 % of a step whenever anything touches; noslip_tolerance (> 0)
+  /// stops it below that improvement (MuJoCo's default). noslip_scope "always" runs it at every
+  /// step (plain MuJoCo); "resting" only in the steps after one in which some free body touched
+  /// the rack and not the robot (an awake tool resting on the rack: without the pass, upside-down
+  /// tools slid down it); held tools and the ball keep from creeping by robot_solimp instead.
+  int noslip_iterations = 30;
+  std::string noslip_scope = "always";
+  double noslip_tolerance = 1e-6;
+  /// Impedance (MuJoCo's solimp: d0, dwidth, width [m]) of every contact the robot makes, with
+  /// solmix robot_solmix (> 0) against the other geom's 1 (1000: the robot's wins). The closer d
+  /// is to 1, the less a soft contact's constraint force is regularised and the less a held tool
+  /// or ball creeps under its weight and the drag (creep speed ~ (1 - d) / d): with
+  /// [0.99, 0.999, 0.001] grasps hold without the noslip pass (scenes/fast.json). The default is
+  /// MuJoCo's. 0 < d0, dwidth < 1, width > 0.
+  Eigen::Vector3d robot_solimp{0.9, 0.95, 0.001};
+  double robot_solmix = 1.0;
   /// MuJoCo's constraint solver ("Newton", "CG" or "PGS") and its Jacobian layout ("dense",
   /// "sparse", or "auto": dense below 60 degrees of freedom, which the scene always is).
   std::string solver = "Newton";

@@ -74,6 +74,59 @@ struct World::Impl {
   std::vector<char> awake, eligible, staying;  // per free body, scratch of the step's update
   int asleep_count = 0;
 
+  // ---- The noslip pass on demand (PhysicsSpec::noslip_scope "resting"). ----
+  bool noslip_on_demand = false;
+  int noslip_iterations = 0;          // the scene's, used in the steps that need the pass
+  std::vector<char> holding_fixture;  // per geom: a fixture that holds resting bodies (the rack)
+  std::vector<char> robot_geom;       // per geom: the robot's
+  std::vector<int> free_of_geom;      // per geom: index in free_bodies, or -1
+  std::vector<char> on_fixture, held;  // per free body, scratch
+
+  // The model's <text name="toolbench_noslip_fixtures" data="prefix"/> (written by the composer
+  // for noslip_scope "resting") turns the pass on only for the steps that need it.
+  void SetUpNoslip() {
+    const int id = mj_name2id(m, mjOBJ_TEXT, "toolbench_noslip_fixtures");
+    if (id < 0 || m->opt.noslip_iterations == 0) return;
+    const std::string prefix = m->text_data + m->text_adr[id];
+    noslip_on_demand = true;
+    noslip_iterations = m->opt.noslip_iterations;
+    holding_fixture.assign(m->ngeom, 0);
+    robot_geom.assign(m->ngeom, 0);
+    free_of_geom.assign(m->ngeom, -1);
+    for (int g = 0; g < m->ngeom; ++g) {
+      const char* name = mj_id2name(m, mjOBJ_GEOM, g);
+      holding_fixture[g] = name && !prefix.empty() && std::string_view(name).rfind(prefix, 0) == 0;
+    }
+    for (int g : robot_geoms) robot_geom[g] = 1;
+    for (size_t j = 0; j < free_bodies.size(); ++j) {
+      for (int g : free_bodies[j].geoms) free_of_geom[g] = static_cast<int>(j);
+    }
+    on_fixture.resize(free_bodies.size());
+    held.resize(free_bodies.size());
+  }
+
+  // Whether the coming step needs the noslip pass: some free body touches a holding fixture and
+  // not the robot (a tool resting on the rack, awake: without the pass it would creep down it),
+  // judged from the contacts of the last step. A held tool, the ball on the table and bodies
+  // asleep (out of the contact solve) do without it.
+  bool NeedsNoslip() {
+    std::fill(on_fixture.begin(), on_fixture.end(), 0);
+    std::fill(held.begin(), held.end(), 0);
+    for (int c = 0; c < d->ncon; ++c) {
+      const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
+      for (const auto& [mine, other] : {std::pair{g1, g2}, std::pair{g2, g1}}) {
+        const int j = free_of_geom[mine];
+        if (j < 0) continue;
+        if (holding_fixture[other]) on_fixture[j] = 1;
+        if (robot_geom[other]) held[j] = 1;
+      }
+    }
+    for (size_t j = 0; j < free_bodies.size(); ++j) {
+      if (on_fixture[j] && !held[j]) return true;
+    }
+    return false;
+  }
+
   void SetUpSleeping() {
     const int id = mj_name2id(m, mjOBJ_NUMERIC, "toolbench_sleep");
     if (id >= 0 && m->numeric_size[id] == 3) {
@@ -260,6 +313,7 @@ World::World(const std::string& mjcf, std::string_view source) : impl_(std::make
   if (!impl_->m) ThrowInvalid("World: MuJoCo cannot load '", source, "': ", error);
   impl_->d = mj_makeData(impl_->m);
   impl_->SetUpSleeping();
+  impl_->SetUpNoslip();
   const mjModel* m = impl_->m;
   for (int a = 0; a < m->nu; ++a) {
     if (m->actuator_trntype[a] != mjTRN_JOINT) {
@@ -295,6 +349,10 @@ SimStatus World::Step(int steps) {
   int taken = 0;
   for (; taken < steps && impl_->status.ok; ++taken) {
     const double t_before = impl_->d->time;
+    if (impl_->noslip_on_demand) {
+      impl_->m->opt.noslip_iterations = impl_->NeedsNoslip() ? impl_->noslip_iterations : 0;
+    }
+    impl_->stats.noslip_steps += impl_->m->opt.noslip_iterations > 0;
     mj_step(impl_->m, impl_->d);
     impl_->stats.contacts += impl_->d->ncon;
     impl_->stats.constraint_rows += impl_->d->nefc;

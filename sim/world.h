@@ -39,8 +39,10 @@ struct PhysicsStats {
   long constraint_rows = 0;   // sum over steps of the constraint rows (nefc)
   long asleep = 0;            // sum over steps of the free bodies asleep (see SleepSettings)
   /// Sum over steps of the constraint solver's iterations (mjData::solver_iter: in MuJoCo 2.2.2
-  /// the noslip pass's iterations are counted in it, ~30 a step whenever anything touches).
+  /// the noslip pass's iterations, when a scene has one, are counted in it).
   long solver_iterations = 0;
+  /// Steps that ran the noslip pass (all of them with PhysicsSpec::noslip_scope "always").
+  long noslip_steps = 0;
   /// The difference of two readings (what happened between them).
   PhysicsStats operator-(const PhysicsStats& before) const {
     return {steps - before.steps,
@@ -48,7 +50,8 @@ struct PhysicsStats {
             contacts - before.contacts,
             constraint_rows - before.constraint_rows,
             asleep - before.asleep,
-            solver_iterations - before.solver_iterations};
+            solver_iterations - before.solver_iterations,
+            noslip_steps - before.noslip_steps};
   }
 };
 
@@ -59,8 +62,8 @@ struct PhysicsStats {
 /// it wakes, with its collisions back, once a robot geom or an awake free body comes within
 /// wake_margin_m (bounding spheres), when it is teleported, or on a reset. Bodies near each other
 /// fall asleep together or not at all. Resting tools make most of a step's contact rows and the
-/// noslip pass costs about their square: a scene at rest steps ~5x faster asleep, one with a tool
-/// in the hand ~1.7x. Off (window_s = 0) it is MuJoCo's plain physics. The composer writes it
+/// noslip pass costs about their square: with 30 noslip iterations a scene at rest stepped ~5x
+/// faster asleep, one with a tool in the hand ~1.7x. Off (window_s = 0) it is MuJoCo's plain physics. The composer writes it
 /// into the MJCF as <numeric name="toolbench_sleep" data="window tolerance margin"/>.
 struct SleepSettings {
   double window_s = 0.0;        // [s], >= 0; 0 = never sleep
@@ -69,7 +72,11 @@ struct SleepSettings {
 };
 
 /// A MuJoCo model and its data: loads MJCF, steps physics, reads encoders and drives the position
-/// servos. Not copyable; movable. Not thread-safe (one World per thread).
+/// servos. Not copyable; movable. Not thread-safe (one World per thread). When the model has
+/// <text name="toolbench_noslip_fixtures" data="prefix"/> (the composer writes "rack_" for
+/// PhysicsSpec::noslip_scope "resting"), the model's noslip pass runs only in the steps after one
+/// in which a free body touched a geom whose name has that prefix and no robot geom
+/// (PhysicsStats::noslip_steps counts the steps that ran it).
 class World {
  public:
   /// Compiles MJCF text (asset paths must be absolute). `source` names the input in errors.

@@ -7,6 +7,7 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include "common/paths.h"
 #include "sim/scene_spec.h"
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -241,6 +242,7 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
   for (const auto& s : result["stages"]) {
     stages.push_back(s["name"]);
     EXPECT_TRUE(s.contains("wall_ms") && s.contains("ok") && s.contains("outcome")) << s.dump();
+    EXPECT_EQ(s["noslip_steps"], s["steps"]) << s["name"];  // the default scene: at every step
   }
   ASSERT_GE(stages.size(), 2u);
   EXPECT_EQ(stages[0], "observe_table");
@@ -252,6 +254,31 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     EXPECT_FALSE(result["chosen_tool"].get<std::string>().empty());
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "table.png"));
+}
+
+// scenes/fast.json: the same episode with the noslip pass only while a tool rests on the rack
+// awake, in the grasp (the tools beside the grasped one wake), never once the tool is away.
+TEST(CliTest, TheFastSceneRunsTheNoslipPassOnlyBesideTheRack) {
+  const auto dir = TempDir("episode_fast");
+  const CliRun r = Toolbench("episode --seed 1 --quiet --scene " + (toolbench::ScenesDir() / "fast.json").string() +
+                             " --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream in(dir / "result.json");
+  const nlohmann::json result = nlohmann::json::parse(in);
+  EXPECT_TRUE(result["grasp_success"].get<bool>());
+  EXPECT_TRUE(result["pull_success"].get<bool>());
+  long steps = 0, noslip = 0;
+  for (const auto& s : result["stages"]) {
+    steps += s["steps"].get<long>();
+    noslip += s["noslip_steps"].get<long>();
+    if (s["name"] == "grasp_tool") {
+      EXPECT_GT(s["noslip_steps"].get<long>(), 0);
+    }
+    if (s["name"] == "put_down" || s["name"] == "grasp_ball") {
+      EXPECT_EQ(s["noslip_steps"], 0) << s["name"];
+    }
+  }
+  EXPECT_LT(noslip, steps / 2);
 }
 
 // Random episode 2 of seed 1 (bench --protocol random --seed 1): three tools on the rack, and the

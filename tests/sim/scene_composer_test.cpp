@@ -173,6 +173,8 @@ TEST_F(ComposerTest, PhysicsSettingsReachTheModel) {
   spec.physics.noslip_iterations = 7;
   spec.physics.tolerance = 1e-6;
   spec.physics.iterations = 40;
+  spec.physics.robot_solimp = {0.95, 0.99, 0.002};
+  spec.physics.robot_solmix = 50;
   World world(ComposeScene(spec, *robot_, *library_, PlanScene(spec, names_, 3, {})).mjcf, "physics");
   const mjModel* m = world.mj_model();
   EXPECT_EQ(m->opt.solver, mjSOL_CG);
@@ -181,6 +183,19 @@ TEST_F(ComposerTest, PhysicsSettingsReachTheModel) {
   EXPECT_DOUBLE_EQ(m->opt.tolerance, 1e-6);
   EXPECT_EQ(m->opt.iterations, 40);
   EXPECT_EQ(m->opt.cone, mjCONE_ELLIPTIC);
+  // Every robot collision geom (and only those) has the robot's contact impedance.
+  int robot_geoms = 0;
+  for (int g = 0; g < m->ngeom; ++g) {
+    const bool robot = m->geom_contype[g] == 1 && m->geom_conaffinity[g] == 0;
+    if (!robot) {
+      EXPECT_DOUBLE_EQ(m->geom_solmix[g], 1.0) << g;
+      continue;
+    }
+    ++robot_geoms;
+    EXPECT_DOUBLE_EQ(m->geom_solmix[g], 50.0) << g;
+    for (int k = 0; k < 3; ++k) EXPECT_DOUBLE_EQ(m->geom_solimp[mjNIMP * g + k], spec.physics.robot_solimp[k]) << g;
+  }
+  EXPECT_GT(robot_geoms, 15);
 }
 
 TEST_F(ComposerTest, FixedCamerasAreWhereTheSceneSaysTheyAre) {

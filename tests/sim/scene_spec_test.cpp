@@ -26,9 +26,11 @@ TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
       R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},
           "physics": {"noslip_tolerance": 1e-4, "solver": "CG", "jacobian": "sparse", "tolerance": 1e-6,
-                      "iterations": 50}})",
+                      "iterations": 50, "robot_solimp": [0.95, 0.99, 0.002], "robot_solmix": 10}})",
       "inline");
   EXPECT_DOUBLE_EQ(spec.physics.noslip_tolerance, 1e-4);
+  EXPECT_EQ(spec.physics.robot_solimp, Eigen::Vector3d(0.95, 0.99, 0.002));
+  EXPECT_DOUBLE_EQ(spec.physics.robot_solmix, 10);
   EXPECT_DOUBLE_EQ(spec.physics.tolerance, 1e-6);
   EXPECT_EQ(spec.physics.iterations, 50);
   EXPECT_EQ(spec.physics.solver, "CG");
@@ -51,6 +53,14 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"noslip_tolerance": 0}})", "tol.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.noslip_tolerance")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 1.0, 0.001]}})", "imp.json"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("imp.json"), HasSubstr("physics.robot_solimp"))));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 0.999, 0]}})", "imp.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.robot_solimp")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 0.999]}})", "imp.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
+  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solmix": 0}})", "mix.json"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.robot_solmix")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"tolerance": -1e-6}})", "tol.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("physics.tolerance")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"iterations": 0}})", "iter.json"); },
