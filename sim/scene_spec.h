@@ -64,8 +64,8 @@ struct PhysicsSpec {
   /// (mujoco#3328) but costs ~60 % of a step whenever anything touches; noslip_tolerance (> 0)
   /// stops it below that improvement (MuJoCo's default). noslip_scope "always" runs it at every
   /// step (plain MuJoCo); "resting" only in the steps after one in which some free body touched
-  /// the rack and not the robot (an awake tool resting on the rack: without the pass, upside-down
-  /// tools slid down it); held tools and the ball keep from creeping by robot_solimp instead.
+  /// the rack and not the robot (an awake tool resting on the rack: without the pass, some
+  /// upside-down tools never came to rest); held tools keep from creeping by robot_solimp instead.
   int noslip_iterations = 30;
   std::string noslip_scope = "always";
   double noslip_tolerance = 1e-6;

@@ -63,8 +63,9 @@ struct PhysicsStats {
 /// wake_margin_m (bounding spheres), when it is teleported, or on a reset. Bodies near each other
 /// fall asleep together or not at all. Resting tools make most of a step's contact rows and the
 /// noslip pass costs about their square: with 30 noslip iterations a scene at rest stepped ~5x
-/// faster asleep, one with a tool in the hand ~1.7x. Off (window_s = 0) it is MuJoCo's plain physics. The composer writes it
-/// into the MJCF as <numeric name="toolbench_sleep" data="window tolerance margin"/>.
+/// faster asleep, one with a tool in the hand ~1.7x. Off (window_s = 0) it is MuJoCo's plain
+/// physics. The composer writes it into the MJCF as
+/// <numeric name="toolbench_sleep" data="window tolerance margin"/>.
 struct SleepSettings {
   double window_s = 0.0;        // [s], >= 0; 0 = never sleep
   double tolerance_m = 2.5e-4;  // [m], > 0
