@@ -71,6 +71,7 @@ struct World::Impl {
   SleepSettings sleep;
   std::vector<FreeBody> free_bodies;
   std::vector<int> robot_geoms;  // collision geoms of bodies that move with joints (not free)
+  std::vector<int> free_of_body;  // per body: index in free_bodies, or -1
   std::vector<char> awake, eligible, staying;  // per free body, scratch of the step's update
   int asleep_count = 0;
 
@@ -78,8 +79,6 @@ struct World::Impl {
   bool noslip_on_demand = false;
   int noslip_iterations = 0;          // the scene's, used in the steps that need the pass
   std::vector<char> holding_fixture;  // per geom: a fixture that holds resting bodies (the rack)
-  std::vector<char> robot_geom;       // per geom: the robot's
-  std::vector<int> free_of_geom;      // per geom: index in free_bodies, or -1
   std::vector<char> on_fixture, held;  // per free body, scratch
 
   // The model's <text name="toolbench_noslip_fixtures" data="prefix"/> (written by the composer
@@ -91,15 +90,9 @@ struct World::Impl {
     noslip_on_demand = true;
     noslip_iterations = m->opt.noslip_iterations;
     holding_fixture.assign(m->ngeom, 0);
-    robot_geom.assign(m->ngeom, 0);
-    free_of_geom.assign(m->ngeom, -1);
     for (int g = 0; g < m->ngeom; ++g) {
       const char* name = mj_id2name(m, mjOBJ_GEOM, g);
       holding_fixture[g] = name && !prefix.empty() && std::string_view(name).rfind(prefix, 0) == 0;
-    }
-    for (int g : robot_geoms) robot_geom[g] = 1;
-    for (size_t j = 0; j < free_bodies.size(); ++j) {
-      for (int g : free_bodies[j].geoms) free_of_geom[g] = static_cast<int>(j);
     }
     on_fixture.resize(free_bodies.size());
     held.resize(free_bodies.size());
@@ -115,10 +108,10 @@ struct World::Impl {
     for (int c = 0; c < d->ncon; ++c) {
       const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
       for (const auto& [mine, other] : {std::pair{g1, g2}, std::pair{g2, g1}}) {
-        const int j = free_of_geom[mine];
+        const int j = free_of_body[m->geom_bodyid[mine]];
         if (j < 0) continue;
         if (holding_fixture[other]) on_fixture[j] = 1;
-        if (robot_geom[other]) held[j] = 1;
+        if (IsRobotGeom(other)) held[j] = 1;
       }
     }
     for (size_t j = 0; j < free_bodies.size(); ++j) {
@@ -127,20 +120,27 @@ struct World::Impl {
     return false;
   }
 
+  // A geom of a body that moves with joints (the robot): neither a free body's nor welded to the
+  // world, and not a plane.
+  bool IsRobotGeom(int g) const {
+    const int b = m->geom_bodyid[g];
+    return free_of_body[b] < 0 && m->body_weldid[b] != 0 && m->geom_type[g] != mjGEOM_PLANE;
+  }
+
   void SetUpSleeping() {
     const int id = mj_name2id(m, mjOBJ_NUMERIC, "toolbench_sleep");
     if (id >= 0 && m->numeric_size[id] == 3) {
       const mjtNum* v = m->numeric_data + m->numeric_adr[id];
       sleep = SleepSettings{v[0], v[1], v[2]};
     }
-    std::vector<int> free_index(m->nbody, -1);
+    free_of_body.assign(m->nbody, -1);
     for (int b = 1; b < m->nbody; ++b) {
       if (m->body_jntnum[b] != 1 || m->jnt_type[m->body_jntadr[b]] != mjJNT_FREE) continue;
       FreeBody fb;
       fb.body = b;
       fb.qpos_adr = m->jnt_qposadr[m->body_jntadr[b]];
       fb.dof_adr = m->jnt_dofadr[m->body_jntadr[b]];
-      free_index[b] = static_cast<int>(free_bodies.size());
+      free_of_body[b] = static_cast<int>(free_bodies.size());
       free_bodies.push_back(fb);
     }
     awake.resize(free_bodies.size());
@@ -149,12 +149,12 @@ struct World::Impl {
     for (int g = 0; g < m->ngeom; ++g) {
       if (m->geom_contype[g] == 0 && m->geom_conaffinity[g] == 0) continue;
       const int b = m->geom_bodyid[g];
-      if (free_index[b] >= 0) {
-        FreeBody& fb = free_bodies[free_index[b]];
+      if (free_of_body[b] >= 0) {
+        FreeBody& fb = free_bodies[free_of_body[b]];
         fb.geoms.push_back(g);
         fb.contype.push_back(m->geom_contype[g]);
         fb.conaffinity.push_back(m->geom_conaffinity[g]);
-      } else if (m->body_weldid[b] != 0 && m->geom_type[g] != mjGEOM_PLANE) {
+      } else if (IsRobotGeom(g)) {
         robot_geoms.push_back(g);
       }
     }

@@ -1,5 +1,7 @@
 #include "sim/scene_spec.h"
 
+#include <utility>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -51,24 +53,26 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
               ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("range.json"), HasSubstr("ball.radius"))));
   EXPECT_THAT([] { ParseSceneSpec(R"({"robot_base": [0, 0]})", "size.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"noslip_tolerance": 0}})", "tol.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.noslip_tolerance")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 1.0, 0.001]}})", "imp.json"); },
-              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("imp.json"), HasSubstr("physics.robot_solimp"))));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 0.999, 0]}})", "imp.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.robot_solimp")));
+  // A physics field out of its range: the message names the scene and the field.
+  const std::pair<const char*, const char*> out_of_range[] = {
+      {R"({"noslip_tolerance": 0})", "physics.noslip_tolerance"},
+      {R"({"noslip_scope": "sometimes"})", "physics.noslip_scope"},
+      {R"({"robot_solimp": [0.99, 1.0, 0.001]})", "physics.robot_solimp"},
+      {R"({"robot_solimp": [0.99, 0.999, 0]})", "physics.robot_solimp"},
+      {R"({"robot_solmix": 0})", "physics.robot_solmix"},
+      {R"({"tolerance": -1e-6})", "physics.tolerance"},
+      {R"({"iterations": 0})", "physics.iterations"},
+      {R"({"sleep_window": -1})", "physics.sleep_window"},
+      {R"({"wake_margin": 0})", "physics.wake_margin"},
+  };
+  for (const auto& [physics, field] : out_of_range) {
+    const std::string text = std::string(R"({"physics": )") + physics + "}";
+    EXPECT_THAT([&] { ParseSceneSpec(text, "physics.json"); },
+                ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("physics.json"), HasSubstr(field))))
+        << physics;
+  }
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solimp": [0.99, 0.999]}})", "imp.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("array of 3 numbers")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"robot_solmix": 0}})", "mix.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.robot_solmix")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"tolerance": -1e-6}})", "tol.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.tolerance")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"iterations": 0}})", "iter.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.iterations")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"sleep_window": -1}})", "sleep.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.sleep_window")));
-  EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"wake_margin": 0}})", "wake.json"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("physics.wake_margin")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"cone": "round"}})", "cone.json"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("round")));
   EXPECT_THAT([] { ParseSceneSpec(R"({"physics": {"solver": "Gauss"}})", "solver.json"); },
