@@ -26,6 +26,11 @@ constexpr double kMinDamping = 1e-9;
 constexpr double kMaxDamping = 1e4;
 // Largest joint change of one rest-refinement step [rad]: keeps the linearisation valid.
 constexpr double kMaxRestStep = 0.2;
+// Longest chain the solver takes: the pre-solve's normal equations live in fixed-capacity
+// matrices (no heap, no size dispatch in the hot loop).
+constexpr int kMaxChainJoints = 16;
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxChainJoints, kMaxChainJoints>;
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxChainJoints, 1>;
 
 // First primes, for the Halton restart points (one base per chain joint, cycled beyond ten).
 constexpr int kPrimes[] = {2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47};
@@ -39,6 +44,41 @@ double Halton(int index, int base) {
     index /= base;
   }
   return r;
+}
+
+// Solves H x = g for a symmetric positive definite H (at most kMaxChainJoints rows) by a
+// Cholesky factorisation on the stack; false when H is not numerically positive definite.
+// Hand-written: at n = 10 Eigen's LDLT and LLT spend more on their per-column block bookkeeping
+// than on the arithmetic. BM_PlanPull (near ball, one plan, ~1.1M factorisations): 1234 ms with
+// the pivoting LDLT on heap matrices, 996 ms with Eigen's LLT on fixed-capacity ones, 849 ms with
+// this and KinematicChain's coordinate-axis joints.
+bool SolveSpd(const SmallMatrix& H, const SmallVector& g, SmallVector& x) {
+  const int n = static_cast<int>(H.rows());
+  double L[kMaxChainJoints][kMaxChainJoints];
+  double inv_diag[kMaxChainJoints];  // 1 / L(j, j): one division per column
+  for (int j = 0; j < n; ++j) {
+    double d = H(j, j);
+    for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
+    if (!(d > 0.0)) return false;
+    inv_diag[j] = 1.0 / std::sqrt(d);
+    for (int i = j + 1; i < n; ++i) {
+      double v = H(i, j);
+      for (int k = 0; k < j; ++k) v -= L[i][k] * L[j][k];
+      L[i][j] = v * inv_diag[j];
+    }
+  }
+  x.resize(n);
+  for (int i = 0; i < n; ++i) {  // L y = g
+    double v = g[i];
+    for (int k = 0; k < i; ++k) v -= L[i][k] * x[k];
+    x[i] = v * inv_diag[i];
+  }
+  for (int i = n - 1; i >= 0; --i) {  // L^T x = y
+    double v = x[i];
+    for (int k = i + 1; k < n; ++k) v -= L[k][i] * x[k];
+    x[i] = v * inv_diag[i];
+  }
+  return true;
 }
 
 struct PoseErrors {
@@ -258,13 +298,12 @@ struct CartesianSolver::Impl {
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app;
   // Pre-solve workspace (no allocation per iteration).
   ChainJacobian J;
-  Eigen::MatrixXd H;
-  Eigen::MatrixXd H_active;
-  Eigen::VectorXd g;
-  Eigen::VectorXd g_active;
-  Eigen::VectorXd dq;
+  SmallMatrix H;
+  SmallMatrix H_active;
+  SmallVector g;
+  SmallVector g_active;
+  SmallVector dq;
   Eigen::VectorXd q_try;
-  Eigen::LDLT<Eigen::MatrixXd> ldlt;
 
   Impl(const KinematicChain& c, const IkOptions& o) : chain(c), options(o) {}
 
@@ -299,15 +338,19 @@ struct CartesianSolver::Impl {
       }
       ++iterations;
       // Normal equations of the weighted residual [e_p; L e_r] (rows of J weighted alike).
-      H.noalias() = J.topRows<3>().transpose() * J.topRows<3>();
-      H.noalias() += (L * L) * (J.bottomRows<3>().transpose() * J.bottomRows<3>());
+      // (lazyProduct: at this size Eigen's blocked matrix product costs more than the arithmetic.)
+      H.noalias() = J.topRows<3>().transpose().lazyProduct(J.topRows<3>());
+      H.noalias() += (L * L) * J.bottomRows<3>().transpose().lazyProduct(J.bottomRows<3>());
       g.noalias() = J.topRows<3>().transpose() * e.e_p;
       g.noalias() += (L * L) * (J.bottomRows<3>().transpose() * e.e_r);
       bool improved = false;
       while (damping <= kMaxDamping) {
         H.diagonal().array() += damping;
-        ldlt.compute(H);
-        dq = ldlt.solve(g);
+        if (!SolveSpd(H, g, dq)) {  // numerically indefinite: damp more
+          H.diagonal().array() -= damping;
+          damping *= 4.0;
+          continue;
+        }
         // Projected Newton: joints at a limit that the step pushes outward are frozen and the
         // step re-solved without them; clamping alone stalls LM against the limits.
         bool frozen = false;
@@ -322,9 +365,10 @@ struct CartesianSolver::Impl {
             frozen = true;
           }
         }
-        if (frozen) {
-          ldlt.compute(H_active);
-          dq = ldlt.solve(g_active);
+        if (frozen && !SolveSpd(H_active, g_active, dq)) {
+          H.diagonal().array() -= damping;
+          damping *= 4.0;
+          continue;
         }
         H.diagonal().array() -= damping;
         q_try = (q + dq).cwiseMax(chain.lower()).cwiseMin(chain.upper());
@@ -400,6 +444,10 @@ CartesianSolver::CartesianSolver(const KinematicChain& chain, const Eigen::Vecto
                  ", expected ", chain.num_model_q(), " finite values");
   }
   const int n = chain.num_joints();
+  if (n > kMaxChainJoints) {
+    ThrowInvalid("CartesianSolver: the chain ", chain.base_link(), " -> ", chain.tip_link(), " has ", n,
+                 " joints; at most ", kMaxChainJoints, " are supported");
+  }
   for (const auto& [joint, weight] : options.rest_weights) {
     (void)weight;
     if (std::find(chain.joint_names().begin(), chain.joint_names().end(), joint) == chain.joint_names().end()) {

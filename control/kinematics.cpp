@@ -36,8 +36,15 @@ KinematicChain::KinematicChain(const robot::RobotModel& model, std::string_view 
       X_pending = X_pending * joint.X_PJ;
       continue;
     }
-    segments_.push_back({X_pending * joint.X_PJ, joint.axis.normalized(),
-                         joint.type == robot::Joint::Type::kPrismatic});
+    Segment segment{X_pending * joint.X_PJ, joint.axis.normalized(), joint.type == robot::Joint::Type::kPrismatic};
+    for (int k = 0; k < 3; ++k) {
+      if (std::abs(std::abs(segment.axis[k]) - 1.0) < 1e-12) {
+        segment.unit_axis = k;
+        segment.axis_sign = segment.axis[k] > 0 ? 1.0 : -1.0;
+        segment.axis = segment.axis_sign * Eigen::Vector3d::Unit(k);
+      }
+    }
+    segments_.push_back(segment);
     X_pending.setIdentity();
     q_indices_.push_back(joint.q_index);
     joint_names_.push_back(joint.name);
@@ -107,6 +114,17 @@ void KinematicChain::Evaluate(const Eigen::VectorXd& q_chain, Eigen::Isometry3d*
     }
     if (s.prismatic) {
       X.translate(s.axis * q_chain[i]);
+    } else if (s.unit_axis >= 0) {
+      // About a coordinate axis k: columns a and b (the other two, cyclic) turn in their plane.
+      const double angle = s.axis_sign * q_chain[i];
+      const double c = std::cos(angle);
+      const double sn = std::sin(angle);
+      const int a = (s.unit_axis + 1) % 3;
+      const int b = (s.unit_axis + 2) % 3;
+      const Eigen::Vector3d col_a = X.linear().col(a);
+      const Eigen::Vector3d col_b = X.linear().col(b);
+      X.linear().col(a) = c * col_a + sn * col_b;
+      X.linear().col(b) = c * col_b - sn * col_a;
     } else {
       X.rotate(Eigen::AngleAxisd(q_chain[i], s.axis));
     }

@@ -65,6 +65,10 @@ class KinematicChain {
     Eigen::Isometry3d X_PJ;   // joint frame in the previous segment's moving frame (fixed joints folded in)
     Eigen::Vector3d axis;     // unit, in the joint frame
     bool prismatic = false;
+    /// 0, 1 or 2 when `axis` is +-x, y or z of the joint frame (every DH-derived joint), with
+    /// the sign in axis_sign: the rotation then changes two columns of the pose. -1 otherwise.
+    int unit_axis = -1;
+    double axis_sign = 1.0;
   };
   std::string base_link_;
   std::string tip_link_;

@@ -924,6 +924,7 @@ void PullOptions::Validate() const {
   if (!(arm_arrival_tol > 0)) fail("arm_arrival_tol", arm_arrival_tol, "> 0");
   if (screening_restarts < 0) fail("screening_restarts", screening_restarts, ">= 0");
   if (screening_ipopt_iterations < 0) fail("screening_ipopt_iterations", screening_ipopt_iterations, ">= 0");
+  if (path_restarts < 0) fail("path_restarts", path_restarts, ">= 0");
   transfer.Validate();
   waypoint.Validate();
   drag.Validate();
@@ -1109,6 +1110,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
   const auto wall_start = std::chrono::steady_clock::now();
   const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
   CartesianSolver solver(chain, desc.HomeQ(), options.ik);
+  CartesianSolver path_solver(chain, desc.HomeQ(), LimitedIk(options.ik, options.path_restarts, 0));
   const IkOptions screen_options =
       LimitedIk(options.ik, options.screening_restarts, options.screening_ipopt_iterations);
   CartesianSolver screen(chain, desc.HomeQ(), screen_options);
@@ -1206,7 +1208,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     X_clear.translation() += options.clear_back_m * back + options.clear_up_m * up;
     // Back and up off the rack, cut short where IK ends (the grasp may have left the arm there).
     const std::vector<Eigen::VectorXd> clear =
-        LineWaypoints(solver, X_now, X_clear, 4, q_now, options.max_joint_step_rad);
+        LineWaypoints(path_solver, X_now, X_clear, 4, q_now, options.max_joint_step_rad);
     const Eigen::VectorXd q_clear = clear.empty() ? q_now : clear.back();
     const Eigen::Isometry3d X_above = chain.TipPose(q_to);
     Eigen::Vector3d toward(-X_above.translation().x(), -X_above.translation().y(), 0.0);
@@ -1234,7 +1236,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       transfer_failure.clear();
       Eigen::VectorXd q_turn = q_clear;
       const size_t kept = legs.size();
-      const bool cartesian = CartesianPath(solver, chain.TipPose(q_clear), X_via, 0.0, 1.0,
+      const bool cartesian = CartesianPath(path_solver, chain.TipPose(q_clear), X_via, 0.0, 1.0,
                                            options.transfer_waypoints, options.max_joint_step_rad, kDepth,
                                            transfer_clear, &q_turn, &legs) &&
                              JointStep(q_turn, q_via) <= options.max_joint_step_rad;
@@ -1249,7 +1251,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
         }
       }
       Eigen::VectorXd q = q_via;
-      if (f > 0 && (!CartesianPath(solver, X_via, X_above, 0.0, 1.0, 3, options.max_joint_step_rad, kDepth,
+      if (f > 0 && (!CartesianPath(path_solver, X_via, X_above, 0.0, 1.0, 3, options.max_joint_step_rad, kDepth,
                                    transfer_clear, &q, &legs) ||
                     JointStep(q, q_to) > options.max_joint_step_rad)) {
         failures.push_back(Cat("down from via point ", f, ": ",
@@ -1453,7 +1455,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       last_failure = Cat("above-start IK: ", ToString(above.status));
       continue;
     }
-    descend = LineWaypoints(solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
+    descend = LineWaypoints(path_solver, X_RP_above, X_RP_start, options.descend_waypoints, above.q);
     if (static_cast<int>(descend.size()) < options.descend_waypoints || !left_arm_clear(above.q) ||
         !path_clear(descend)) {
       last_failure = Cat("descent waypoint ", descend.size() + 1, " IK failed");
@@ -1463,7 +1465,7 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     X_RP_end.translation() += pull_length * u;
     drag.clear();
     Eigen::VectorXd q_drag = descend.back();
-    const bool drag_complete = CartesianPath(solver, X_RP_start, X_RP_end, 0.0, 1.0, options.drag_waypoints,
+    const bool drag_complete = CartesianPath(path_solver, X_RP_start, X_RP_end, 0.0, 1.0, options.drag_waypoints,
                                              options.max_drag_joint_step_rad, 2, left_arm_clear, &q_drag, &drag);
     // How far along the pull the planned drag goes (halved steps make waypoints uneven).
     const double drag_m = drag_complete ? pull_length

@@ -456,6 +456,11 @@ struct PullOptions {
   int screening_restarts = 3;     // cheap IK for sampled orientations: restarts, >= 0
   /// And Ipopt iterations after a failed pre-solve, >= 0 (0: none, the default; 10 until session 5).
   int screening_ipopt_iterations = 0;
+  /// Restarts (>= 0) of the path waypoints' solves (transfer, descent, drag), each warm-started
+  /// from its neighbour: a restart elsewhere lands on another IK branch, which the path refuses
+  /// (max_joint_step_rad), so a waypoint that fails from its neighbour fails anyway. With
+  /// ik.presolve_restarts (30) these failing waypoints were most of a plan's cost.
+  int path_restarts = 1;
   /// Called, when set, after each stage that moved the robot, with the stage's name:
   /// "above_start" (transfer done), "at_start" (descent done),
   /// "dragged", "lifted". For observers; must not move the robot.

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "common/rng.h"
+#include "common/check.h"
 #include "robot/robot_description.h"
 
 namespace toolbench::control {
@@ -165,6 +166,22 @@ TEST_F(IkTest, BadInputIsNamed) {
   options.rest_weights["neck_yaw"] = 1.0;
   EXPECT_THAT([&] { CartesianSolver(*chain_, robot_->HomeQ(), options); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("neck_yaw")));
+}
+
+TEST(IkChainTest, AChainLongerThanTheSolverTakesIsNamed) {
+  std::string urdf = R"(<?xml version="1.0"?><robot name="snake"><link name="l0"/>)";
+  constexpr int kJoints = 17;
+  for (int i = 1; i <= kJoints; ++i) {
+    urdf += Cat("<link name=\"l", i, "\"/><joint name=\"j", i, "\" type=\"revolute\"><parent link=\"l", i - 1,
+                "\"/><child link=\"l", i, "\"/><origin xyz=\"0.05 0 0\"/><axis xyz=\"0 0 1\"/>",
+                "<limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>");
+  }
+  urdf += "</robot>";
+  const robot::RobotModel model = robot::ParseUrdf(urdf, "inline snake");
+  const KinematicChain chain(model, "l0", Cat("l", kJoints));
+  ASSERT_EQ(chain.num_joints(), kJoints);
+  EXPECT_THAT([&] { CartesianSolver(chain, Eigen::VectorXd::Zero(model.num_q())); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("has 17 joints; at most 16")));
 }
 
 }  // namespace

@@ -139,5 +139,46 @@ TEST(KinematicsUrdfTest, UrdfWithoutArmJointsGivesClearError) {
   EXPECT_TRUE(J.col(0).isApprox((Eigen::Matrix<double, 6, 1>() << -0.1, 0, 0, 0, 0, 1).finished(), 1e-12));
 }
 
+// Evaluate turns coordinate-axis joints (+-x, y, z) by two columns and any other axis by
+// angle-axis: each kind, and a prismatic joint, against robot::LinkPose and finite differences.
+TEST(KinematicsUrdfTest, EveryKindOfJointAxisMatchesTheModelsLinkPoses) {
+  const robot::RobotModel model = robot::ParseUrdf(R"(<?xml version="1.0"?>
+<robot name="axes">
+  <link name="base"/><link name="a"/><link name="b"/><link name="c"/><link name="d"/><link name="e"/><link name="tip"/>
+  <joint name="jx" type="revolute"><parent link="base"/><child link="a"/>
+    <origin xyz="0.1 0 0" rpy="0.2 0 0"/><axis xyz="1 0 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="jy" type="revolute"><parent link="a"/><child link="b"/>
+    <origin xyz="0 0.1 0" rpy="0 0.3 0"/><axis xyz="0 -1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="jz" type="continuous"><parent link="b"/><child link="c"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0.4"/><axis xyz="0 0 1"/></joint>
+  <joint name="jg" type="revolute"><parent link="c"/><child link="d"/>
+    <origin xyz="0.05 0.05 0" rpy="0.1 0.2 0.3"/><axis xyz="0 0.6 0.8"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="jp" type="prismatic"><parent link="d"/><child link="e"/>
+    <origin xyz="0 0 0.05"/><axis xyz="0.6 0 -0.8"/><limit lower="-0.1" upper="0.1" effort="1" velocity="1"/></joint>
+  <joint name="tip_fixed" type="fixed"><parent link="e"/><child link="tip"/><origin xyz="0.1 0.02 0"/></joint>
+</robot>)",
+                                                   "inline axes");
+  const KinematicChain chain(model, "base", "tip");
+  ASSERT_EQ(chain.num_joints(), 5);
+  Rng rng(DeriveSeed(1, "kinematics_axes"));
+  for (int trial = 0; trial < 20; ++trial) {
+    Eigen::VectorXd q(model.num_q());
+    for (int i = 0; i < q.size(); ++i) q[i] = UniformReal(rng, -1.0, 1.0) * (i == 4 ? 0.1 : 2.0);
+    EXPECT_TRUE(chain.TipPose(q).matrix().isApprox(robot::LinkPose(model, q, "tip").matrix(), kPoseTol));
+    const ChainJacobian J = chain.Jacobian(q);
+    for (int i = 0; i < chain.num_joints(); ++i) {
+      Eigen::VectorXd q_plus = q;
+      Eigen::VectorXd q_minus = q;
+      q_plus[chain.q_indices()[i]] += kStep;
+      q_minus[chain.q_indices()[i]] -= kStep;
+      const Eigen::Vector3d v = (chain.TipPose(q_plus).translation() - chain.TipPose(q_minus).translation()) / (2 * kStep);
+      const Eigen::Vector3d w =
+          OrientationError(chain.TipPose(q_plus).linear(), chain.TipPose(q_minus).linear()) / (2 * kStep);
+      EXPECT_LT((J.col(i).head<3>() - v).norm(), kJacobianTol) << chain.joint_names()[i];
+      EXPECT_LT((J.col(i).tail<3>() - w).norm(), kJacobianTol) << chain.joint_names()[i];
+    }
+  }
+}
+
 }  // namespace
 }  // namespace toolbench::control

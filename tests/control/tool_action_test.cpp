@@ -221,6 +221,12 @@ TEST(SkillOptionsTest, IpoptRescuesMayBeTurnedOff) {
   EXPECT_NO_THROW(ball.Validate());
   ball.grasp_ipopt_iterations = -1;
   EXPECT_THAT([&] { ball.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("grasp_ipopt_iterations")));
+  PullOptions pull;
+  EXPECT_EQ(pull.path_restarts, 1);
+  pull.path_restarts = 0;
+  EXPECT_NO_THROW(pull.Validate());
+  pull.path_restarts = -1;
+  EXPECT_THAT([&] { pull.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("path_restarts")));
 }
 
 TEST(HandleTowardEffectorTest, TurnsTheHandleAxisTowardTheEffector) {
