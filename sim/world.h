@@ -60,7 +60,8 @@ struct PhysicsStats {
 /// with no robot collision geom and no awake free body within wake_margin_m of its collision
 /// geoms, leaves the contact solve (its geoms stop colliding) and is held exactly where it rests;
 /// it wakes, with its collisions back, once a robot geom or an awake free body comes within
-/// wake_margin_m (bounding spheres), when it is teleported, or on a reset. Bodies near each other
+/// wake_margin_m (of a box enclosing each geom, oriented with it; the bounding sphere for planes
+/// and height fields), when it is teleported, or on a reset. Bodies near each other
 /// fall asleep together or not at all. Resting tools make most of a step's contact rows and the
 /// noslip pass costs about their square: with 30 noslip iterations a scene at rest stepped ~5x
 /// faster asleep, one with a tool in the hand ~1.7x. Off (window_s = 0) it is MuJoCo's plain

@@ -186,6 +186,53 @@ TEST_F(WorldTest, RestingBodiesSleepAndWakeWhenSomethingComesNear) {
   EXPECT_TRUE(world.status().ok) << world.status().message;
 }
 
+// A sleeper wakes when a mover comes within the wake margin of its box, not of its bounding
+// sphere: a long tool's sphere is as wide as the tool is long (carried past its neighbours on the
+// rack, a tool kept them awake, and the noslip pass on, for seconds).
+TEST_F(WorldTest, ASleeperWakesNearItsBoxNotAnywhereInItsBoundingSphere) {
+  const ComposedScene scene = Compose(2, {{"lstick_1", "rot0"}});
+  World world(scene.mjcf, "sleep, box");
+  const std::string tool = scene.tools[0].body;
+  ASSERT_TRUE(world.SettleFreeBodies(spec_->physics.settle_time));
+  world.Advance(2.0 * world.sleep_settings().window_s);
+  ASSERT_TRUE(world.IsAsleep(tool));
+  // The tool's mesh geom: its box in the geom frame from the mesh's vertices, and the box axis
+  // along which it is thinnest.
+  const mjModel* m = world.mj_model();
+  const mjData* d = world.mj_data();
+  const int body = mj_name2id(m, mjOBJ_BODY, tool.c_str());
+  int g = -1;  // the mesh; the tool's other geoms (primitive pieces of its shape) lie inside it
+  for (int k = 0; k < m->body_geomnum[body] && g < 0; ++k) {
+    if (m->geom_type[m->body_geomadr[body] + k] == mjGEOM_MESH) g = m->body_geomadr[body] + k;
+  }
+  ASSERT_GE(g, 0);
+  const int mesh = m->geom_dataid[g];
+  const Eigen::Map<const Eigen::Matrix3Xf> v(m->mesh_vert + 3 * m->mesh_vertadr[mesh], 3, m->mesh_vertnum[mesh]);
+  const Eigen::Vector3d lo = v.rowwise().minCoeff().cast<double>();
+  const Eigen::Vector3d hi = v.rowwise().maxCoeff().cast<double>();
+  const Eigen::Vector3d half = 0.5 * (hi - lo);
+  int thin = 0;
+  half.minCoeff(&thin);
+  const Eigen::Matrix3d R = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(d->geom_xmat + 9 * g);
+  const Eigen::Vector3d centre = Eigen::Map<const Eigen::Vector3d>(d->geom_xpos + 3 * g) + R * (0.5 * (lo + hi));
+  // Above (or below) the thin side: the ball put there falls toward the tool, or away from it.
+  const Eigen::Vector3d side = R.col(thin).z() >= 0 ? R.col(thin) : Eigen::Vector3d(-R.col(thin));
+  const double r = spec_->ball.radius;
+  const double margin = world.sleep_settings().wake_margin_m;
+  auto put_ball = [&](double gap) {
+    Eigen::Isometry3d X_WB = Eigen::Isometry3d::Identity();
+    X_WB.translation() = centre + (half[thin] + r + gap) * side;
+    world.TeleportFreeBody("ball", X_WB);
+    world.Step();
+  };
+  const double far_gap = 3.0 * margin;
+  ASSERT_LT(half[thin] + r + far_gap, m->geom_rbound[g] + r + margin) << "not inside the bounding sphere";
+  put_ball(far_gap);
+  EXPECT_TRUE(world.IsAsleep(tool)) << "woken by a ball " << far_gap << " m from its box";
+  put_ball(0.5 * margin);
+  EXPECT_FALSE(world.IsAsleep(tool)) << "not woken by a ball " << 0.5 * margin << " m from its box";
+}
+
 // scenes/fast.json runs the noslip pass only while a tool rests awake on the rack (noslip_scope
 // "resting") and stiffens the robot's contacts instead: tools awake on the rack hold still as with
 // the pass at every step, and once everything sleeps no step runs it.
