@@ -75,13 +75,17 @@ struct World::Impl {
   std::vector<char> awake, eligible, staying;  // per free body, scratch of the step's update
   int asleep_count = 0;
   // Per geom: a box in the geom's frame that encloses it (centre, half extents; for a mesh its
-  // vertices', whose convex hull MuJoCo collides), or box_valid 0 (planes, height fields): the
+  // vertices', whose convex hull MuJoCo collides), or not valid (planes, height fields): the
   // bounding sphere alone then. A long tool's bounding sphere is as wide as the tool is long:
   // spheres alone kept its neighbours on the rack awake (and, in scenes/fast.json, the noslip
   // pass on) while it was carried past them: random episodes seed 1, 4735 -> 913 steps with the
   // pass an episode (of ~20100).
-  std::vector<Eigen::Vector3d> box_center, box_half;
-  std::vector<char> box_valid;
+  struct GeomBox {
+    Eigen::Vector3d center = Eigen::Vector3d::Zero();
+    Eigen::Vector3d half = Eigen::Vector3d::Zero();
+    bool valid = true;
+  };
+  std::vector<GeomBox> boxes;
 
   // ---- The noslip pass on demand (PhysicsSpec::noslip_scope "resting"). ----
   bool noslip_on_demand = false;
@@ -184,29 +188,27 @@ struct World::Impl {
   }
 
   void SetUpGeomBoxes() {
-    box_center.assign(m->ngeom, Eigen::Vector3d::Zero());
-    box_half.assign(m->ngeom, Eigen::Vector3d::Zero());
-    box_valid.assign(m->ngeom, 1);
+    boxes.assign(m->ngeom, GeomBox{});
     for (int g = 0; g < m->ngeom; ++g) {
       const mjtNum* size = m->geom_size + 3 * g;
-      Eigen::Vector3d& h = box_half[g];
+      GeomBox& box = boxes[g];
       switch (m->geom_type[g]) {
-        case mjGEOM_SPHERE: h.setConstant(size[0]); break;
-        case mjGEOM_CAPSULE: h << size[0], size[0], size[0] + size[1]; break;
-        case mjGEOM_CYLINDER: h << size[0], size[0], size[1]; break;
+        case mjGEOM_SPHERE: box.half.setConstant(size[0]); break;
+        case mjGEOM_CAPSULE: box.half << size[0], size[0], size[0] + size[1]; break;
+        case mjGEOM_CYLINDER: box.half << size[0], size[0], size[1]; break;
         case mjGEOM_ELLIPSOID:
-        case mjGEOM_BOX: h << size[0], size[1], size[2]; break;
+        case mjGEOM_BOX: box.half << size[0], size[1], size[2]; break;
         case mjGEOM_MESH: {
           const int mesh = m->geom_dataid[g];
           const Eigen::Map<const Eigen::Matrix3Xf> v(m->mesh_vert + 3 * m->mesh_vertadr[mesh], 3,
                                                      m->mesh_vertnum[mesh]);
           const Eigen::Vector3d lo = v.rowwise().minCoeff().cast<double>();
           const Eigen::Vector3d hi = v.rowwise().maxCoeff().cast<double>();
-          box_center[g] = 0.5 * (lo + hi);
-          h = 0.5 * (hi - lo);
+          box.center = 0.5 * (lo + hi);
+          box.half = 0.5 * (hi - lo);
           break;
         }
-        default: box_valid[g] = 0; break;
+        default: box.valid = false; break;
       }
     }
   }
@@ -219,13 +221,15 @@ struct World::Impl {
     const mjtNum* b = d->geom_xpos + 3 * h;
     const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
     if (dx * dx + dy * dy + dz * dz >= reach * reach) return false;
-    if (!box_valid[g] || !box_valid[h]) return true;
+    const GeomBox& box_g = boxes[g];
+    const GeomBox& box_h = boxes[h];
+    if (!box_g.valid || !box_h.valid) return true;
     using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
     const Eigen::Matrix3d Ra = Eigen::Map<const RowMajor3>(d->geom_xmat + 9 * g);
     const Eigen::Matrix3d Rb = Eigen::Map<const RowMajor3>(d->geom_xmat + 9 * h);
-    const Eigen::Vector3d ca = Eigen::Map<const Eigen::Vector3d>(a) + Ra * box_center[g];
-    const Eigen::Vector3d cb = Eigen::Map<const Eigen::Vector3d>(b) + Rb * box_center[h];
-    return BoxesOverlap(Ra, ca, box_half[g].array() + sleep.wake_margin_m, Rb, cb, box_half[h]);
+    const Eigen::Vector3d ca = Eigen::Map<const Eigen::Vector3d>(a) + Ra * box_g.center;
+    const Eigen::Vector3d cb = Eigen::Map<const Eigen::Vector3d>(b) + Rb * box_h.center;
+    return BoxesOverlap(Ra, ca, box_g.half.array() + sleep.wake_margin_m, Rb, cb, box_h.half);
   }
 
   // Separating-axis test of two oriented boxes (rotation, centre, half extents; the 15 axes of

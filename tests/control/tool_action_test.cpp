@@ -204,29 +204,28 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_edge_margin_m")));
 }
 
+// A count option: 0 is accepted, a negative count refused with a message naming the field.
+template <class Options>
+void ExpectZeroAcceptedNegativeRefused(Options options, int Options::*count, const char* field) {
+  options.*count = 0;
+  EXPECT_NO_THROW(options.Validate()) << field;
+  options.*count = -1;
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr(field)));
+}
+
 TEST(SkillOptionsTest, IpoptRescuesMayBeTurnedOff) {
   // 0 = no Ipopt after a failed pre-solve (the defaults of the grasp's fallback pass and of the
   // ball grasp); a negative count is refused, naming the field.
-  GraspOptions grasp;
-  EXPECT_EQ(grasp.fallback_ipopt_iterations, 0);
-  grasp.path_ipopt_iterations = 0;
-  EXPECT_NO_THROW(grasp.Validate());
-  grasp.fallback_ipopt_iterations = -1;
-  EXPECT_THAT([&] { grasp.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("fallback_ipopt_iterations")));
-  grasp.fallback_ipopt_iterations = 0;
-  grasp.path_ipopt_iterations = -1;
-  EXPECT_THAT([&] { grasp.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("path_ipopt_iterations")));
-  BallGraspOptions ball;
-  EXPECT_EQ(ball.grasp_ipopt_iterations, 0);
-  EXPECT_NO_THROW(ball.Validate());
-  ball.grasp_ipopt_iterations = -1;
-  EXPECT_THAT([&] { ball.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("grasp_ipopt_iterations")));
-  PullOptions pull;
-  EXPECT_EQ(pull.path_restarts, 1);
-  pull.path_restarts = 0;
-  EXPECT_NO_THROW(pull.Validate());
-  pull.path_restarts = -1;
-  EXPECT_THAT([&] { pull.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("path_restarts")));
+  EXPECT_EQ(GraspOptions{}.fallback_ipopt_iterations, 0);
+  ExpectZeroAcceptedNegativeRefused(GraspOptions{}, &GraspOptions::fallback_ipopt_iterations,
+                                    "fallback_ipopt_iterations");
+  ExpectZeroAcceptedNegativeRefused(GraspOptions{}, &GraspOptions::path_ipopt_iterations, "path_ipopt_iterations");
+  EXPECT_EQ(BallGraspOptions{}.grasp_ipopt_iterations, 0);
+  EXPECT_NO_THROW(BallGraspOptions{}.Validate());
+  ExpectZeroAcceptedNegativeRefused(BallGraspOptions{}, &BallGraspOptions::grasp_ipopt_iterations,
+                                    "grasp_ipopt_iterations");
+  EXPECT_EQ(PullOptions{}.path_restarts, 1);
+  ExpectZeroAcceptedNegativeRefused(PullOptions{}, &PullOptions::path_restarts, "path_restarts");
 }
 
 TEST(HandleTowardEffectorTest, TurnsTheHandleAxisTowardTheEffector) {
