@@ -16,6 +16,8 @@ struct TableSpec {
   Eigen::Vector2d size{0.50, 0.60};      // top extent along x and y [m], > 0
   double top_z = -0.10;                  // height of the top face in R [m]
   double thickness = 0.03;               // [m], > 0
+
+  bool operator==(const TableSpec&) const = default;
 };
 
 /// The ball to be retrieved; its (x, y) is drawn uniformly from the ranges (R frame).
@@ -24,6 +26,8 @@ struct BallSpec {
   double mass = 0.06;                      // [kg], > 0
   Eigen::Vector2d x_range{-0.62, -0.60};   // [m], min <= max
   Eigen::Vector2d y_range{-0.10, 0.05};    // [m], min <= max
+
+  bool operator==(const BallSpec&) const = default;
 };
 
 /// The tool rack: an inclined board with a ledge at its foot, to the robot's right, facing it
@@ -43,9 +47,11 @@ struct RackSpec {
   double standoff = 0.05;      // tools rest this far in front of the board, on a rail and a
                                // stop on the ledge, so fingers fit behind a handle [m], >= 0
   double rail_height = 0.18;   // z_K of the rail's centre [m], > 0
-  double slot_pos1 = -0.17;    // x_K of place pos1 [m] (the end away from the table)
+  double slot_pos1 = -0.13;    // x_K of place pos1 [m] (the end away from the table)
   double slot_pos2 = 0.0;      // x_K of place pos2 [m] (central place, used by rot0..rot3)
-  double slot_pos3 = 0.17;     // x_K of place pos3 [m] (the end near the table)
+  double slot_pos3 = 0.14;     // x_K of place pos3 [m] (the end near the table)
+
+  bool operator==(const RackSpec&) const = default;
 };
 
 /// How many tools a random scene gets and from which models.
@@ -53,6 +59,8 @@ struct ToolsSpec {
   int min_count = 1;                 // >= 1
   int max_count = 3;                 // >= min_count, <= 3
   std::vector<std::string> choices;  // model names; empty = the whole library
+
+  bool operator==(const ToolsSpec&) const = default;
 };
 
 /// Simulation settings of the scene.
@@ -63,20 +71,22 @@ struct PhysicsSpec {
   /// MuJoCo's noslip pass (>= 0 iterations; 0 = off) removes the creep of soft contacts
   /// (mujoco#3328) but costs ~60 % of a step whenever anything touches; noslip_tolerance (> 0)
   /// stops it below that improvement (MuJoCo's default). noslip_scope "always" runs it at every
-  /// step (plain MuJoCo); "resting" only in the steps after one in which some free body touched
-  /// the rack and not the robot (an awake tool resting on the rack: without the pass, some
-  /// upside-down tools never came to rest); held tools keep from creeping by robot_solimp instead.
+  /// step (plain MuJoCo; scenes/noslip_always.json); "resting" (the default) only in the steps
+  /// after one in which some free body touched the rack and not the robot (an awake tool resting
+  /// on the rack: without the pass, some upside-down tools never came to rest); held tools keep
+  /// from creeping by robot_solimp instead.
   int noslip_iterations = 30;
-  std::string noslip_scope = "always";
+  std::string noslip_scope = "resting";
   double noslip_tolerance = 1e-6;
   /// Impedance (MuJoCo's solimp: d0, dwidth, width [m]) of every contact the robot makes, with
   /// solmix robot_solmix (> 0) against the other geom's 1 (1000: the robot's wins). The closer d
   /// is to 1, the less a soft contact's constraint force is regularised and the less a held tool
-  /// or ball creeps under its weight and the drag (creep speed ~ (1 - d) / d): with
-  /// [0.99, 0.999, 0.001] grasps hold without the noslip pass (scenes/fast.json). The default is
-  /// MuJoCo's. 0 < d0, dwidth < 1, width > 0.
-  Eigen::Vector3d robot_solimp{0.9, 0.95, 0.001};
-  double robot_solmix = 1.0;
+  /// or ball creeps under its weight and the drag (creep speed ~ (1 - d) / d), and the stiffer the
+  /// grip: the default [0.95, 0.99, 0.001] holds grasps without the noslip pass about as well as
+  /// MuJoCo's [0.9, 0.95, 0.001] (solmix 1) with it, where [0.99, 0.999, 0.001] let more tools
+  /// pivot out of the hand in pull-gt (README). 0 < d0, dwidth < 1, width > 0.
+  Eigen::Vector3d robot_solimp{0.95, 0.99, 0.001};
+  double robot_solmix = 1000.0;
   /// MuJoCo's constraint solver ("Newton", "CG" or "PGS") and its Jacobian layout ("dense",
   /// "sparse", or "auto": dense below 60 degrees of freedom, which the scene always is).
   std::string solver = "Newton";
@@ -92,6 +102,8 @@ struct PhysicsSpec {
   double sleep_window = 0.25;
   double sleep_tolerance = 2.5e-4;
   double wake_margin = 0.02;
+
+  bool operator==(const PhysicsSpec&) const = default;
 };
 
 /// A complete scene description (scenes/*.json). Paths are relative to the assets folder.
@@ -108,6 +120,8 @@ struct SceneSpec {
 
   /// Throws std::invalid_argument naming the field and value when out of range.
   void Validate() const;
+
+  bool operator==(const SceneSpec&) const = default;
 };
 
 /// Parses scene JSON text. Every field is optional (defaults above); unknown fields are errors

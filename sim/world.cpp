@@ -77,9 +77,9 @@ struct World::Impl {
   // Per geom: a box in the geom's frame that encloses it (centre, half extents; for a mesh its
   // vertices', whose convex hull MuJoCo collides), or not valid (planes, height fields): the
   // bounding sphere alone then. A long tool's bounding sphere is as wide as the tool is long:
-  // spheres alone kept its neighbours on the rack awake (and, in scenes/fast.json, the noslip
-  // pass on) while it was carried past them: random episodes seed 1, 4735 -> 913 steps with the
-  // pass an episode (of ~20100).
+  // spheres alone kept its neighbours on the rack awake (and, with noslip_scope "resting", the
+  // noslip pass on) while it was carried past them: random episodes seed 1, 4735 -> 913 steps
+  // with the pass an episode (of ~20100).
   struct GeomBox {
     Eigen::Vector3d center = Eigen::Vector3d::Zero();
     Eigen::Vector3d half = Eigen::Vector3d::Zero();

@@ -24,6 +24,19 @@ TEST(SceneSpecTest, EmptyObjectGivesDefaults) {
   EXPECT_EQ(spec.tools.max_count, 3);
 }
 
+// scenes/README.md promises that a field left out of a scene file takes scenes/default.json's
+// value: the file and the code's defaults are the same scene.
+TEST(SceneSpecTest, TheDefaultFileSpellsOutTheDefaults) {
+  const SceneSpec file = LoadSceneSpec(DefaultScenePath());
+  const SceneSpec defaults = ParseSceneSpec("{}", "inline");
+  EXPECT_TRUE(file.table == defaults.table);
+  EXPECT_TRUE(file.ball == defaults.ball);
+  EXPECT_TRUE(file.rack == defaults.rack);
+  EXPECT_TRUE(file.tools == defaults.tools);
+  EXPECT_TRUE(file.physics == defaults.physics);
+  EXPECT_TRUE(file == defaults);
+}
+
 TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
       R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},

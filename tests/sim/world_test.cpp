@@ -233,18 +233,17 @@ TEST_F(WorldTest, ASleeperWakesNearItsBoxNotAnywhereInItsBoundingSphere) {
   EXPECT_FALSE(world.IsAsleep(tool)) << "not woken by a ball " << 0.5 * margin << " m from its box";
 }
 
-// scenes/fast.json runs the noslip pass only while a tool rests awake on the rack (noslip_scope
+// The default scene runs the noslip pass only while a tool rests awake on the rack (noslip_scope
 // "resting") and stiffens the robot's contacts instead: tools awake on the rack hold still as with
 // the pass at every step, and once everything sleeps no step runs it.
-TEST_F(WorldTest, FastSceneRunsNoslipOnlyWhileAToolRestsAwakeOnTheRack) {
-  const SceneSpec fast = LoadSceneSpec(ScenesDir() / "fast.json");
-  ASSERT_EQ(fast.physics.noslip_scope, "resting");
-  SceneSpec awake = fast;
+TEST_F(WorldTest, NoslipRunsOnlyWhileAToolRestsAwakeOnTheRack) {
+  ASSERT_EQ(spec_->physics.noslip_scope, "resting");
+  SceneSpec awake = *spec_;
   awake.physics.sleep_window = 0.0;
   for (std::uint64_t seed : {1, 2, 3, 4, 5, 6}) {
     const ComposedScene scene = Compose(seed, {}, &awake);
-    World world(scene.mjcf, "fast, awake");
-    ASSERT_TRUE(world.SettleFreeBodies(fast.physics.settle_time)) << "seed " << seed;
+    World world(scene.mjcf, "resting, awake");
+    ASSERT_TRUE(world.SettleFreeBodies(awake.physics.settle_time)) << "seed " << seed;
     const GroundTruth before = world.ground_truth();
     const PhysicsStats stats_before = world.physics_stats();
     ASSERT_TRUE(world.Advance(2.0).ok) << world.status().message;
@@ -256,9 +255,11 @@ TEST_F(WorldTest, FastSceneRunsNoslipOnlyWhileAToolRestsAwakeOnTheRack) {
       EXPECT_LT(drift, 1e-3) << "seed " << seed << ": " << tool.name << " in " << tool.cell;
     }
   }
-  // Asleep, nothing rests on the rack in the contact solve: no step runs the pass, where the
-  // default scene ("always") runs it at every step.
-  for (const SceneSpec* spec : {&fast, static_cast<const SceneSpec*>(spec_)}) {
+  // Asleep, nothing rests on the rack in the contact solve: no step runs the pass, where
+  // scenes/noslip_always.json ("always") runs it at every step.
+  const SceneSpec always = LoadSceneSpec(ScenesDir() / "noslip_always.json");
+  ASSERT_EQ(always.physics.noslip_scope, "always");
+  for (const SceneSpec* spec : {static_cast<const SceneSpec*>(spec_), &always}) {
     const ComposedScene scene = Compose(2, {{"hoe_1", "rot3"}}, spec);
     World world(scene.mjcf, spec->name);
     ASSERT_TRUE(world.SettleFreeBodies(spec->physics.settle_time));
@@ -267,7 +268,7 @@ TEST_F(WorldTest, FastSceneRunsNoslipOnlyWhileAToolRestsAwakeOnTheRack) {
     const PhysicsStats before = world.physics_stats();
     world.Advance(0.5);
     const PhysicsStats slept = world.physics_stats() - before;
-    EXPECT_EQ(slept.noslip_steps, spec == spec_ ? slept.steps : 0) << spec->name;
+    EXPECT_EQ(slept.noslip_steps, spec == &always ? slept.steps : 0) << spec->name;
   }
 }
 
