@@ -73,8 +73,8 @@ struct PhysicsSpec {
   /// stops it below that improvement (MuJoCo's default). noslip_scope "always" runs it at every
   /// step (plain MuJoCo; scenes/noslip_always.json); "resting" (the default) only in the steps
   /// after one in which some free body touched the rack and not the robot (an awake tool resting
-  /// on the rack: without the pass, some upside-down tools never came to rest); held tools keep
-  /// from creeping by robot_solimp instead.
+  /// on the rack: without the pass, some upside-down tools never came to rest); held tools are
+  /// kept from creeping by robot_solimp instead, less well (README, Speed).
   int noslip_iterations = 30;
   std::string noslip_scope = "resting";
   double noslip_tolerance = 1e-6;
@@ -82,9 +82,11 @@ struct PhysicsSpec {
   /// solmix robot_solmix (> 0) against the other geom's 1 (1000: the robot's wins). The closer d
   /// is to 1, the less a soft contact's constraint force is regularised and the less a held tool
   /// or ball creeps under its weight and the drag (creep speed ~ (1 - d) / d), and the stiffer the
-  /// grip: the default [0.95, 0.99, 0.001] holds grasps without the noslip pass about as well as
-  /// MuJoCo's [0.9, 0.95, 0.001] (solmix 1) with it, where [0.99, 0.999, 0.001] let more tools
-  /// pivot out of the hand in pull-gt (README). 0 < d0, dwidth < 1, width > 0.
+  /// grip. With the default [0.95, 0.99, 0.001] and no noslip pass the robot pulls from
+  /// ground-truth handles about as well as with MuJoCo's [0.9, 0.95, 0.001] (solmix 1) and the
+  /// pass, but held tools slip more (grasp-gt's 2 s hold: median 1.7 against 0.06 mm);
+  /// [0.99, 0.999, 0.001] let more tools pivot out of the hand in pull-gt (README, Speed).
+  /// 0 < d0, dwidth < 1, width > 0.
   Eigen::Vector3d robot_solimp{0.95, 0.99, 0.001};
   double robot_solmix = 1000.0;
   /// MuJoCo's constraint solver ("Newton", "CG" or "PGS") and its Jacobian layout ("dense",

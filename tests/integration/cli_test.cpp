@@ -268,7 +268,9 @@ TEST(CliTest, TheNoslipPassRunsBesideTheRackOrAtEveryStepAsTheSceneSays) {
   };
   // (Outcomes are left to the benchmarks: a last bit of another machine's libm can tip a pull.)
   long steps = 0, noslip = 0;
-  for (const auto& s : stages("", "episode_resting")) {
+  const nlohmann::json resting_stages = stages("", "episode_resting");
+  ASSERT_GE(resting_stages.size(), 2u);
+  for (const auto& s : resting_stages) {
     steps += s["steps"].get<long>();
     noslip += s["noslip_steps"].get<long>();
     if (s["name"] == "grasp_tool") {
@@ -280,7 +282,9 @@ TEST(CliTest, TheNoslipPassRunsBesideTheRackOrAtEveryStepAsTheSceneSays) {
   }
   EXPECT_LT(noslip, steps / 2);
   const std::string always = "--scene " + (toolbench::ScenesDir() / "noslip_always.json").string();
-  for (const auto& s : stages(always, "episode_always")) {
+  const nlohmann::json always_stages = stages(always, "episode_always");
+  ASSERT_GE(always_stages.size(), 2u);
+  for (const auto& s : always_stages) {
     EXPECT_EQ(s["noslip_steps"], s["steps"]) << s["name"];
   }
 }
