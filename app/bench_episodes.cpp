@@ -128,6 +128,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   std::vector<std::string> stage_order;  // as the episodes ran them (first seen first)
   std::map<std::string, int> failures;
   std::vector<double> wall_s, robot_s, physics_s, displacement;
+  std::vector<double> drift_deg, drift_m;  // the tool's turn in the grip where the pull's drag starts
   std::vector<double> chance;  // per scored choice: 1 / tools on the rack (a random pick's agreement)
   int crashed = 0;
   for (const SweepLine& line : lines) {
@@ -166,6 +167,10 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
       stage_robot_s[name].push_back(s.value("robot_s", 0.0));
       stage_physics_ms[name].push_back(s.value("physics_ms", 0.0));
       physics_ms += s.value("physics_ms", 0.0);
+      if (name == "pull" && s.contains("details") && s["details"].contains("at_start_error_deg_truth")) {
+        drift_deg.push_back(s["details"]["at_start_error_deg_truth"].get<double>());
+        drift_m.push_back(s["details"]["at_start_effector_error_m_truth"].get<double>());
+      }
     }
     physics_s.push_back(physics_ms / 1000.0);
     const std::string failure = r.value("failure", std::string());
@@ -193,6 +198,12 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   summary["wall_s_p90"] = Percentile(wall_s, 90);
   summary["robot_s_median"] = Percentile(robot_s, 50);
   summary["physics_s_median"] = Percentile(physics_s, 50);  // wall time inside mj_step
+  // Ground truth, for scoring: how far the tool had turned in the grip since the inspection when
+  // the pull's drag started (rotation; the effector's displacement), over the executed pulls.
+  summary["grip_drift_at_drag_start"] = {{"deg_median", Percentile(drift_deg, 50)},
+                                         {"deg_p90", Percentile(drift_deg, 90)},
+                                         {"effector_m_median", Percentile(drift_m, 50)},
+                                         {"n", drift_deg.size()}};
   for (const auto& [name, values] : stage_ms) {
     summary["stage_ms"][name] = {
         {"median", Percentile(values, 50)}, {"p90", Percentile(values, 90)}, {"n", values.size()}};
@@ -227,6 +238,12 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   md << fmt::format("\nWall time per episode: median {:.1f} s, p90 {:.1f} s; of it physics (mj_step) {:.1f} s; "
                     "robot (simulated) time {:.1f} s.\n",
                     Percentile(wall_s, 50), Percentile(wall_s, 90), Percentile(physics_s, 50), Percentile(robot_s, 50));
+  if (!drift_deg.empty()) {
+    md << fmt::format("\nThe tool's turn in the grip since the inspection where the drag started (ground truth, "
+                      "{} pulls): median {:.1f} deg (p90 {:.1f}), the effector {:.1f} mm off the plan's.\n",
+                      drift_deg.size(), Percentile(drift_deg, 50), Percentile(drift_deg, 90),
+                      1000 * Percentile(drift_m, 50));
+  }
   if (!failures.empty()) {
     md << "\n| first failure | episodes |\n|---|---|\n";
     for (const auto& [name, n] : failures) md << "| " << name << " | " << n << " |\n";

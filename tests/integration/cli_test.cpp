@@ -253,6 +253,18 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     if (s["name"] == "put_down" || s["name"] == "grasp_ball") {
       EXPECT_EQ(s["noslip_steps"], 0) << s["name"];
     }
+    // A pull that dragged measures how far the tool had turned in the grip since the inspection
+    // (seed 1 here: it lost the tool in the drag).
+    if (s["name"] == "pull" && (s["outcome"] == "pulled" || s["outcome"] == "lost_tool")) {
+      for (const char* stage : {"above_start", "at_start", "dragged"}) {
+        const std::string deg = std::string(stage) + "_error_deg_truth";
+        const std::string m = std::string(stage) + "_effector_error_m_truth";
+        ASSERT_TRUE(s["details"].contains(deg) && s["details"].contains(m)) << s["details"].dump();
+        EXPECT_GE(s["details"][deg].get<double>(), 0.0);
+        EXPECT_LT(s["details"][deg].get<double>(), 180.0 + 1e-9);
+        EXPECT_GE(s["details"][m].get<double>(), 0.0);
+      }
+    }
   }
   EXPECT_LT(noslip, steps / 2);
   ASSERT_GE(stages.size(), 2u);
