@@ -710,13 +710,17 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     if (!holding) return finish();
 
     // ---- 5b. Look at the tool in the hand: it may have pivoted in the grip as it came up. ----
+    // Scoring only: the tool's true pose in the palm at X_RP (in R).
+    auto X_PT_truth_at = [&](const Eigen::Isometry3d& X_RP) {
+      return X_RP.inverse() * X_RW * world.ground_truth().Pose(tool_body);
+    };
     // Looks at the tool in the hand and corrects X_PT (the plan's, or where the person put it).
     auto inspect_held_tool = [&](StageRecord& s) {
       const Eigen::Isometry3d X_PT_plan = X_PT;
       const HeldToolView view = InspectHeldTool(robot, desc, see, *model, X_PT);
       const perception::HeldToolEstimate& e = view.estimate;
       // Scoring only: how far the plan's and the used in-hand poses are from the truth.
-      const Eigen::Isometry3d X_PT_truth = view.X_RP.inverse() * X_RW * world.ground_truth().Pose(tool_body);
+      const Eigen::Isometry3d X_PT_truth = X_PT_truth_at(view.X_RP);
       const InHandError plan_error = InHandPoseError(X_PT_plan, X_PT_truth, model->effector.center);
       const InHandError used_error = InHandPoseError(view.X_PT, X_PT_truth, model->effector.center);
       X_PT = view.X_PT;
@@ -786,15 +790,14 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // swings the tool to its working orientation and it turns in the grip meanwhile (random
       // seed 1: median 8.9 deg above the start, 9.1 deg where the drag starts; 6.4 deg there with
       // the noslip pass at every step).
-      nlohmann::json creep;
+      nlohmann::json grip_turn;
       pull_options.on_stage = [&](const char* stage) {
         const std::string name = stage;
         if (name == "above_start" || name == "at_start" || name == "dragged") {
-          const Eigen::Isometry3d X_RP = PalmPoseFromEncoders(desc, robot);
-          const Eigen::Isometry3d X_PT_truth = X_RP.inverse() * X_RW * world.ground_truth().Pose(tool_body);
-          const InHandError e = InHandPoseError(X_PT, X_PT_truth, model->effector.center);
-          creep[name + "_error_deg_truth"] = e.rotation_deg;
-          creep[name + "_effector_error_m_truth"] = e.effector_m;
+          const InHandError e = InHandPoseError(X_PT, X_PT_truth_at(PalmPoseFromEncoders(desc, robot)),
+                                                model->effector.center);
+          grip_turn[name + "_error_deg_truth"] = e.rotation_deg;
+          grip_turn[name + "_effector_error_m_truth"] = e.effector_m;
         }
         stage_frame("action_" + name);
       };
@@ -821,7 +824,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details["pull_elevation_deg"] = p.elevation_rad * 180 / M_PI;
       s.details["pull_yaw_deg"] = p.yaw_rad * 180 / M_PI;
       s.details["pull_roll_deg"] = p.roll_rad * 180 / M_PI;
-      for (const auto& [key, value] : creep.items()) s.details[key] = value;
+      for (const auto& [key, value] : grip_turn.items()) s.details[key] = value;
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
       return p.status;
