@@ -215,7 +215,8 @@ Eigen::Isometry3d ChokedHandleFrame(const robot::RobotDescription& desc, const E
   return X;
 }
 
-control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
+control::ToolEffector EffectorOf(const toollib::ToolModel& model, double max_edge_m) {
+  if (!(max_edge_m > 0)) ThrowInvalid("EffectorOf: max_edge_m = ", max_edge_m, " (expected > 0)");
   control::ToolEffector e;
   e.center_T = model.effector.center;
   e.direction_T = Eigen::Vector3d::UnitX();
@@ -226,16 +227,34 @@ control::ToolEffector EffectorOf(const toollib::ToolModel& model) {
     if (d.norm() <= region) reach = std::max(reach, d.dot(e.direction_T));
   }
   e.half_thickness_m = reach;
-  // The geometry the pull plans with: the effector region's vertices and the whole mesh.
+  // The geometry the pull plans with: the vertices, and the grid points of faces with long edges
+  // (barycentric (i, j, n - i - j) / n, n = longest edge / max_edge_m rounded up; 1 % slack keeps
+  // a face whose longest edge is max_edge_m to a float's rounding whole), the whole tool's and
+  // those of its effector region.
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(static_cast<size_t>(model.mesh.vertices.cols()));
+  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) points.emplace_back(model.mesh.vertices.col(v).cast<double>());
+  for (Eigen::Index f = 0; f < model.mesh.faces.cols(); ++f) {
+    const Eigen::Vector3d a = model.mesh.vertices.col(model.mesh.faces(0, f)).cast<double>();
+    const Eigen::Vector3d b = model.mesh.vertices.col(model.mesh.faces(1, f)).cast<double>();
+    const Eigen::Vector3d c = model.mesh.vertices.col(model.mesh.faces(2, f)).cast<double>();
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int n = static_cast<int>(std::ceil(longest / max_edge_m - 0.01));
+    for (int i = 0; i <= n && n > 1; ++i) {
+      for (int j = 0; i + j <= n; ++j) {
+        if (i == n || j == n || i + j == 0) continue;  // the corners are vertices already
+        points.push_back((i * a + j * b + (n - i - j) * c) / n);
+      }
+    }
+  }
+  e.tool_points_T.resize(3, static_cast<Eigen::Index>(points.size()));
   std::vector<Eigen::Index> near;
-  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) {
-    if ((model.mesh.vertices.col(v).cast<double>() - e.center_T).norm() <= region) near.push_back(v);
+  for (size_t i = 0; i < points.size(); ++i) {
+    e.tool_points_T.col(static_cast<Eigen::Index>(i)) = points[i];
+    if ((points[i] - e.center_T).norm() <= region) near.push_back(static_cast<Eigen::Index>(i));
   }
   e.points_T.resize(3, static_cast<Eigen::Index>(near.size()));
-  for (size_t i = 0; i < near.size(); ++i) {
-    e.points_T.col(static_cast<Eigen::Index>(i)) = model.mesh.vertices.col(near[i]).cast<double>();
-  }
-  e.tool_points_T = model.mesh.vertices.cast<double>();
+  for (size_t i = 0; i < near.size(); ++i) e.points_T.col(static_cast<Eigen::Index>(i)) = e.tool_points_T.col(near[i]);
   return e;
 }
 

@@ -114,9 +114,12 @@ LookResult LookWithNeck(RobotInterface& interface, const robot::RobotDescription
                         const Eigen::Vector3d& p_R_target);
 
 /// The effector of a library tool as the pull skill needs it, in T: the sidecar's effector
-/// centre, working direction +x_T, its reach along +x_T from the mesh, the mesh vertices of the
-/// effector region and of the whole tool.
-control::ToolEffector EffectorOf(const toollib::ToolModel& model);
+/// centre, working direction +x_T, its reach along +x_T from the mesh, and the points of the
+/// effector region and of the whole tool: the mesh vertices and, on each face with an edge longer
+/// than max_edge_m [m] (> 0), a grid of points that splits it into triangles with edges no longer
+/// (a user's mesh of a few large faces is otherwise empty between its corners, where the pull's
+/// clearance checks see no tool; the library's meshes have edges of at most 2 cm, and get none).
+control::ToolEffector EffectorOf(const toollib::ToolModel& model, double max_edge_m = 0.02);
 
 /// The hand's grasp frame G in the palm frame P: origin at the centre of the cylinder the hand
 /// holds (desc.grasp.center), z_G along its axis (desc.grasp.axis), x_G the palm's x_P turned by
