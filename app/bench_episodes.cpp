@@ -151,6 +151,18 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
         chance.push_back(r["truth"]["hindsight"].value("chance", std::nan("")));
       }
       count("grasp_success", r.value("grasp_success", false));
+      for (const auto& s : r["stages"]) {
+        // Over the episodes whose tool's handle was within reach (a grasp planned), as grasp-gt
+        // rates the cells: a handle out of reach is the hand-over's case, not a failed grasp.
+        if (s.value("name", "") == "grasp_tool" && s.contains("details") && s["details"].contains("grasp_planned") &&
+            s["details"]["grasp_planned"].get<bool>()) {
+          count("grasp_success_within_reach", r.value("grasp_success", false));
+        }
+      }
+      if (r["truth"].contains("chosen_tool_perception")) {
+        // Ground truth: the tool the robot went for was perceived perfectly (Table 5.3's score 1).
+        count("chosen_tool_perceived", r["truth"]["chosen_tool_perception"].value("score", 0.0) >= 1.0);
+      }
       count("pull_success", r.value("pull_success", false));
       count("assisted", r.value("assisted", false));
       displacement.push_back(r.value("achieved_displacement_m", 0.0));

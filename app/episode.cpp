@@ -24,6 +24,7 @@
 #include "app/held_tool_view.h"
 #include "app/overview.h"
 #include "app/perceive.h"
+#include "app/scoring.h"
 #include "common/check.h"
 #include "common/paths.h"
 #include "common/rng.h"
@@ -524,6 +525,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       }
       TOOLBENCH_DEMAND(model != nullptr);
       double nearest = 1e9;
+      const toollib::ToolModel* true_model = nullptr;
       for (const auto& placed : scene.composed.tools) {
         const auto placed_model = std::find_if(scene.library.begin(), scene.library.end(),
                                                [&](const toollib::ToolModel& m) { return m.name == placed.name; });
@@ -533,9 +535,22 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         if (d < nearest) {
           nearest = d;
           tool_body = placed.body;
+          true_model = &*placed_model;
         }
       }
       result.truth["chosen_tool_body"] = tool_body;
+      TOOLBENCH_DEMAND(true_model != nullptr);
+      // Scoring only: the perception of the tool the robot goes for, as Table 5.3 scores a cell
+      // (a grasp that fails on a handle seen 3 cm off is perception's failure, not control's),
+      // against where the tool lies when the robot turns to it.
+      const CellScore score =
+          ScoreCell(*tool, *true_model, X_RW * world.ground_truth().Pose(tool_body), model->family);
+      result.truth["chosen_tool_perception"] = {{"score", score.score},
+                                                {"verdict", score.verdict},
+                                                {"handle_error_m", score.handle_error_m},
+                                                {"axis_error_deg", score.axis_error_deg},
+                                                {"effector_error_deg", score.effector_error_deg},
+                                                {"recognised", score.recognised}};
     };
     select_tool(result.chosen_segment);
 
@@ -678,6 +693,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       result.grasp_success = holding && !result.assisted && z1 - z0 >= 0.05;
       s.details = {{"tool_lift_m_truth", z1 - z0},
                    {"assisted", result.assisted},
+                   // The robot planned a grasp of the tool it went for (its handle within reach) and
+                   // moved: grasp_success's denominator in the random summary's within-reach rate.
+                   {"grasp_planned", !control::PlanningFailed(g.status)},
                    {"slide_m", g.slide_m},
                    {"axis_flipped", g.axis_flipped},
                    {"roll_deg", g.roll_rad * 180 / M_PI},

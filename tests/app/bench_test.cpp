@@ -265,6 +265,35 @@ TEST(BenchReportTest, RandomReportScoresTheChoiceBesideChance) {
   EXPECT_THAT(ReadText(request.out_dir / "summary.md"), HasSubstr("a random pick would be right 61 %"));
 }
 
+// The own-grasp rate also over the episodes whose tool's handle was within reach (a grasp
+// planned), as grasp-gt rates the cells, and the perception of the tool gone for.
+TEST(BenchReportTest, RandomReportRatesGraspsWithinReachAndThePerceptionOfTheChosenTool) {
+  BenchRequest request;
+  request.out_dir = TempDir("random_report_reach");
+  auto line = [](int index, bool planned, bool grasped, double score) {
+    nlohmann::json stages = nlohmann::json::array(
+        {{{"name", "grasp_tool"}, {"ok", true}, {"wall_ms", 1.0}, {"details", {{"grasp_planned", planned}}}}});
+    nlohmann::json truth;
+    truth["chosen_tool_perception"]["score"] = score;
+    const nlohmann::json result = {
+        {"ball_reachable_at_start", false}, {"grasp_success", grasped}, {"stages", stages}, {"truth", truth}};
+    return SweepLine{{"protocol", "random"},
+                     {"index", index},
+                     {"id", "episode/" + std::to_string(index)},
+                     {"ok", true},
+                     {"result", result}};
+  };
+  ReportRandomEpisodes(request, {line(0, true, true, 1.0), line(1, false, false, 1.0), line(2, true, false, 0.5),
+                                 line(3, true, true, 0.0)});
+  const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
+  EXPECT_EQ(summary["grasp_success"]["successes"], 2);
+  EXPECT_EQ(summary["grasp_success"]["n"], 4);
+  EXPECT_EQ(summary["grasp_success_within_reach"]["successes"], 2);
+  EXPECT_EQ(summary["grasp_success_within_reach"]["n"], 3);
+  EXPECT_EQ(summary["chosen_tool_perceived"]["successes"], 2);
+  EXPECT_EQ(summary["chosen_tool_perceived"]["n"], 4);
+}
+
 TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   BenchRequest request;
   request.protocol = "grasp-gt";

@@ -14,6 +14,7 @@
 
 namespace {
 
+using ::testing::AnyOf;
 using ::testing::HasSubstr;
 
 struct CliRun {
@@ -275,6 +276,17 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     EXPECT_NE(std::find(stages.begin(), stages.end(), "perceive_tools"), stages.end());
     EXPECT_NE(std::find(stages.begin(), stages.end(), "choose_tool"), stages.end());
     EXPECT_FALSE(result["chosen_tool"].get<std::string>().empty());
+    // Scored against ground truth: the perception of the tool the robot went for, and whether its
+    // grasp was planned (the handle within reach).
+    const nlohmann::json& perceived = result["truth"]["chosen_tool_perception"];
+    EXPECT_THAT(perceived["score"].get<double>(), AnyOf(0.0, 0.5, 1.0)) << perceived.dump();
+    EXPECT_GE(perceived["handle_error_m"].get<double>(), 0.0);
+    EXPECT_FALSE(perceived["verdict"].get<std::string>().empty());
+    for (const auto& s : result["stages"]) {
+      if (s["name"] == "grasp_tool") {
+        EXPECT_TRUE(s["details"]["grasp_planned"].is_boolean()) << s["details"].dump();
+      }
+    }
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "table.png"));
 }
