@@ -54,6 +54,24 @@ void ScoreChoiceInHindsight(const SceneRequest& scene_request, nlohmann::json* r
 
 }  // namespace
 
+std::string HelpReason(const nlohmann::json& result) {
+  const nlohmann::json stages = result.value("stages", nlohmann::json::array());
+  for (const auto& s : stages) {
+    if (s.value("name", "") != "grasp_tool" || s.value("outcome", "") != "handed_over") continue;
+    const nlohmann::json details = s.value("details", nlohmann::json::object());
+    return details.value("grasp_planned", true) ? "hand-over: the grasp failed" : "hand-over: the handle out of reach";
+  }
+  for (const auto& s : stages) {
+    if (s.value("name", "") == "re_grip") return "re-grip: the look at the tool in the hand found none";
+  }
+  for (const auto& s : stages) {
+    if (s.contains("details") && s["details"].is_object() && s["details"].contains("regrip_after")) {
+      return "re-grip: no plan of the action from the robot's own grip";
+    }
+  }
+  return "other";
+}
+
 nlohmann::json JudgeChoiceInHindsight(const nlohmann::json& pulls, const std::string& chosen_tool) {
   if (!pulls.is_array() || pulls.empty()) ThrowInvalid("JudgeChoiceInHindsight: no pulls to judge against");
   for (const nlohmann::json& p : pulls) {
@@ -130,6 +148,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   std::vector<double> wall_s, robot_s, physics_s, displacement;
   std::vector<double> drift_deg, drift_m;  // the tool's turn in the grip where the pull's drag starts
   std::vector<double> chance;  // per scored choice: 1 / tools on the rack (a random pick's agreement)
+  std::map<std::string, int> help_reasons;  // assisted episodes by HelpReason
   int crashed = 0;
   for (const SweepLine& line : lines) {
     if (!line.value("ok", false)) {
@@ -165,6 +184,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
       }
       count("pull_success", r.value("pull_success", false));
       count("assisted", r.value("assisted", false));
+      if (r.value("assisted", false)) ++help_reasons[HelpReason(r)];
       displacement.push_back(r.value("achieved_displacement_m", 0.0));
     }
     count("ball_grasp_success", r.value("ball_grasp_success", false));
@@ -223,6 +243,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     summary["stage_physics_ms_median"][name] = Percentile(stage_physics_ms[name], 50);
   }
   summary["failures"] = failures;
+  summary["help_reasons"] = help_reasons;
   WriteJson(request.out_dir / "summary.json", summary);
 
   std::ostringstream md;
@@ -255,6 +276,10 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
                       "{} pulls): median {:.1f} deg (p90 {:.1f}), the effector {:.1f} mm off the plan's.\n",
                       drift_deg.size(), Percentile(drift_deg, 50), Percentile(drift_deg, 90),
                       1000 * Percentile(drift_m, 50));
+  }
+  if (!help_reasons.empty()) {
+    md << "\n| why the robot was helped | episodes |\n|---|---|\n";
+    for (const auto& [reason, n] : help_reasons) md << "| " << reason << " | " << n << " |\n";
   }
   if (!failures.empty()) {
     md << "\n| first failure | episodes |\n|---|---|\n";

@@ -25,10 +25,18 @@ int RunRandomEpisodesBench(const BenchRequest& request);
 /// empty or malformed `pulls`.
 nlohmann::json JudgeChoiceInHindsight(const nlohmann::json& pulls, const std::string& chosen_tool);
 
+/// Why an assisted episode's robot was helped, from its result.json: the tool handed over after
+/// the grasp stage ("hand-over: the handle out of reach" when no grasp was planned, "hand-over:
+/// the grasp failed" when one moved and did not hold it), or the robot's own grip re-done by a
+/// person ("re-grip: the look at the tool in the hand found none", "re-grip: no plan of the
+/// action from the robot's own grip"); "other" otherwise.
+std::string HelpReason(const nlohmann::json& result);
+
 /// Writes summary.json and summary.md from random-episode results lines: success rates of grasp,
-/// pull and ball grasp with 95 % Wilson intervals, assisted share, stage-time medians and 90th
-/// percentiles, wall time per episode; with --hindsight the choice's agreement with the best tool
-/// (choice_correct) beside a random pick's (choice_correct_by_chance).
+/// pull and ball grasp with 95 % Wilson intervals, assisted share and its reasons (help_reasons,
+/// by HelpReason), stage-time medians and 90th percentiles, wall time per episode; with
+/// --hindsight the choice's agreement with the best tool (choice_correct) beside a random pick's
+/// (choice_correct_by_chance).
 void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLine>& lines);
 
 }  // namespace toolbench::app

@@ -294,6 +294,40 @@ TEST(BenchReportTest, RandomReportRatesGraspsWithinReachAndThePerceptionOfTheCho
   EXPECT_EQ(summary["chosen_tool_perceived"]["n"], 4);
 }
 
+// Why the robot was helped, from the stages an assisted episode ran.
+TEST(BenchReportTest, HelpReasonNamesTheHandOverOrTheReGrip) {
+  auto result = [](nlohmann::json stages) { return nlohmann::json{{"assisted", true}, {"stages", stages}}; };
+  auto grasp = [](const char* outcome, bool planned) {
+    return nlohmann::json{{"name", "grasp_tool"}, {"outcome", outcome}, {"details", {{"grasp_planned", planned}}}};
+  };
+  EXPECT_EQ(HelpReason(result({grasp("handed_over", false)})), "hand-over: the handle out of reach");
+  EXPECT_EQ(HelpReason(result({grasp("handed_over", true)})), "hand-over: the grasp failed");
+  EXPECT_EQ(HelpReason(result({grasp("grasped", true), {{"name", "inspect_tool"}}, {{"name", "re_grip"}}})),
+            "re-grip: the look at the tool in the hand found none");
+  EXPECT_EQ(HelpReason(result({grasp("grasped", true),
+                               {{"name", "pull"}, {"details", {{"regrip_after", "unreachable: ..."}}}}})),
+            "re-grip: no plan of the action from the robot's own grip");
+  EXPECT_EQ(HelpReason(result({grasp("grasped", true)})), "other");
+
+  BenchRequest request;
+  request.out_dir = TempDir("random_report_help");
+  auto line = [&](int index, const nlohmann::json& r) {
+    nlohmann::json full = r;
+    full["ball_reachable_at_start"] = false;
+    for (auto& s : full["stages"]) s["wall_ms"] = 1.0;
+    return SweepLine{{"protocol", "random"}, {"index", index}, {"ok", true}, {"result", full}};
+  };
+  ReportRandomEpisodes(request, {line(0, result({grasp("handed_over", false)})),
+                                 line(1, result({grasp("handed_over", false)})),
+                                 line(2, result({grasp("handed_over", true)})),
+                                 line(3, {{"assisted", false}, {"stages", {grasp("grasped", true)}}})});
+  const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
+  EXPECT_EQ(summary["help_reasons"]["hand-over: the handle out of reach"], 2);
+  EXPECT_EQ(summary["help_reasons"]["hand-over: the grasp failed"], 1);
+  EXPECT_EQ(summary["help_reasons"].size(), 2u);
+  EXPECT_THAT(ReadText(request.out_dir / "summary.md"), HasSubstr("| hand-over: the handle out of reach | 2 |"));
+}
+
 TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   BenchRequest request;
   request.protocol = "grasp-gt";
