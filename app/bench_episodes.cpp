@@ -52,22 +52,30 @@ void ScoreChoiceInHindsight(const SceneRequest& scene_request, nlohmann::json* r
   truth["hindsight"] = judged;
 }
 
+// The first stage of a result.json named `name`, or an empty object when it did not run.
+nlohmann::json StageOf(const nlohmann::json& result, const std::string& name) {
+  for (const auto& s : result.value("stages", nlohmann::json::array())) {
+    if (s.value("name", "") == name) return s;
+  }
+  return nlohmann::json::object();
+}
+
+// A stage's details field `key`, or `fallback` when the stage or the field is missing.
+template <typename T>
+T DetailOf(const nlohmann::json& stage, const char* key, T fallback) {
+  return stage.value("details", nlohmann::json::object()).value(key, fallback);
+}
+
 }  // namespace
 
 std::string HelpReason(const nlohmann::json& result) {
-  const nlohmann::json stages = result.value("stages", nlohmann::json::array());
-  for (const auto& s : stages) {
-    if (s.value("name", "") != "grasp_tool" || s.value("outcome", "") != "handed_over") continue;
-    const nlohmann::json details = s.value("details", nlohmann::json::object());
-    return details.value("grasp_planned", true) ? "hand-over: the grasp failed" : "hand-over: the handle out of reach";
+  const nlohmann::json grasp = StageOf(result, "grasp_tool");
+  if (grasp.value("outcome", "") == "handed_over") {
+    return DetailOf(grasp, "grasp_planned", true) ? "hand-over: the grasp failed" : "hand-over: the handle out of reach";
   }
-  for (const auto& s : stages) {
-    if (s.value("name", "") == "re_grip") return "re-grip: the look at the tool in the hand found none";
-  }
-  for (const auto& s : stages) {
-    if (s.contains("details") && s["details"].is_object() && s["details"].contains("regrip_after")) {
-      return "re-grip: no plan of the action from the robot's own grip";
-    }
+  if (!StageOf(result, "re_grip").empty()) return "re-grip: the look at the tool in the hand found none";
+  for (const auto& s : result.value("stages", nlohmann::json::array())) {
+    if (!DetailOf(s, "regrip_after", std::string()).empty()) return "re-grip: no plan of the action from the robot's own grip";
   }
   return "other";
 }
@@ -162,21 +170,16 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     if (needed_tool) {
       // choice_made: the choose_tool stage picked a tool; choice_correct when the episode scored
       // its choice against ground truth (truth.choice_correct).
-      bool chose = false;
-      for (const auto& s : r["stages"]) chose = chose || (s.value("name", "") == "choose_tool" && s.value("ok", false));
-      count("choice_made", chose);
+      count("choice_made", StageOf(r, "choose_tool").value("ok", false));
       if (r["truth"].contains("choice_correct")) {
         count("choice_correct", r["truth"]["choice_correct"].get<bool>());
         chance.push_back(r["truth"]["hindsight"].value("chance", std::nan("")));
       }
       count("grasp_success", r.value("grasp_success", false));
-      for (const auto& s : r["stages"]) {
-        // Over the episodes whose tool's handle was within reach (a grasp planned), as grasp-gt
-        // rates the cells: a handle out of reach is the hand-over's case, not a failed grasp.
-        if (s.value("name", "") == "grasp_tool" && s.contains("details") && s["details"].contains("grasp_planned") &&
-            s["details"]["grasp_planned"].get<bool>()) {
-          count("grasp_success_within_reach", r.value("grasp_success", false));
-        }
+      // Over the episodes whose tool's handle was within reach (a grasp planned), as grasp-gt
+      // rates the cells: a handle out of reach is the hand-over's case, not a failed grasp.
+      if (DetailOf(StageOf(r, "grasp_tool"), "grasp_planned", false)) {
+        count("grasp_success_within_reach", r.value("grasp_success", false));
       }
       if (r["truth"].contains("chosen_tool_perception")) {
         // Ground truth: the tool the robot went for was perceived perfectly (Table 5.3's score 1).

@@ -227,31 +227,32 @@ control::ToolEffector EffectorOf(const toollib::ToolModel& model, double max_edg
     if (d.norm() <= region) reach = std::max(reach, d.dot(e.direction_T));
   }
   e.half_thickness_m = reach;
-  // The geometry the pull plans with: the vertices, and the grid points of faces with long edges
+  // The geometry the pull plans with: the vertices, then the grid points of faces with long edges
   // (barycentric (i, j, n - i - j) / n, n = longest edge / max_edge_m rounded up; 1 % slack keeps
   // a face whose longest edge is max_edge_m to a float's rounding whole), the whole tool's and
   // those of its effector region.
-  std::vector<Eigen::Vector3d> points;
-  points.reserve(static_cast<size_t>(model.mesh.vertices.cols()));
-  for (Eigen::Index v = 0; v < model.mesh.vertices.cols(); ++v) points.emplace_back(model.mesh.vertices.col(v).cast<double>());
+  const Eigen::Matrix3Xd& vertices = model.mesh.vertices;
+  std::vector<Eigen::Vector3d> grid;
   for (Eigen::Index f = 0; f < model.mesh.faces.cols(); ++f) {
-    const Eigen::Vector3d a = model.mesh.vertices.col(model.mesh.faces(0, f)).cast<double>();
-    const Eigen::Vector3d b = model.mesh.vertices.col(model.mesh.faces(1, f)).cast<double>();
-    const Eigen::Vector3d c = model.mesh.vertices.col(model.mesh.faces(2, f)).cast<double>();
+    const Eigen::Vector3d a = vertices.col(model.mesh.faces(0, f));
+    const Eigen::Vector3d b = vertices.col(model.mesh.faces(1, f));
+    const Eigen::Vector3d c = vertices.col(model.mesh.faces(2, f));
     const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
     const int n = static_cast<int>(std::ceil(longest / max_edge_m - 0.01));
-    for (int i = 0; i <= n && n > 1; ++i) {
+    if (n < 2) continue;
+    for (int i = 0; i <= n; ++i) {
       for (int j = 0; i + j <= n; ++j) {
         if (i == n || j == n || i + j == 0) continue;  // the corners are vertices already
-        points.push_back((i * a + j * b + (n - i - j) * c) / n);
+        grid.push_back((i * a + j * b + (n - i - j) * c) / n);
       }
     }
   }
-  e.tool_points_T.resize(3, static_cast<Eigen::Index>(points.size()));
+  e.tool_points_T.resize(3, vertices.cols() + static_cast<Eigen::Index>(grid.size()));
+  e.tool_points_T.leftCols(vertices.cols()) = vertices;
+  for (size_t i = 0; i < grid.size(); ++i) e.tool_points_T.col(vertices.cols() + static_cast<Eigen::Index>(i)) = grid[i];
   std::vector<Eigen::Index> near;
-  for (size_t i = 0; i < points.size(); ++i) {
-    e.tool_points_T.col(static_cast<Eigen::Index>(i)) = points[i];
-    if ((points[i] - e.center_T).norm() <= region) near.push_back(static_cast<Eigen::Index>(i));
+  for (Eigen::Index i = 0; i < e.tool_points_T.cols(); ++i) {
+    if ((e.tool_points_T.col(i) - e.center_T).norm() <= region) near.push_back(i);
   }
   e.points_T.resize(3, static_cast<Eigen::Index>(near.size()));
   for (size_t i = 0; i < near.size(); ++i) e.points_T.col(static_cast<Eigen::Index>(i)) = e.tool_points_T.col(near[i]);
