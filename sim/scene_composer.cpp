@@ -505,7 +505,8 @@ ComposedScene ComposeScene(const SceneSpec& spec, const robot::RobotDescription&
                 "\" tolerance=\"" + Num(spec.physics.tolerance) +
                 "\" iterations=\"" + std::to_string(spec.physics.iterations) +
                 "\" integrator=\"Euler\"/>");
-  w.Line(1, "<size njmax=\"2000\" nconmax=\"500\"/>");
+  w.Line(1, "<size njmax=\"" + std::to_string(spec.physics.max_constraint_rows) + "\" nconmax=\"" +
+                std::to_string(spec.physics.max_contacts) + "\"/>");
   // Read by sim::World (SleepSettings, PhysicsSpec::noslip_scope); other MuJoCo programs ignore
   // them and run plain physics (the noslip pass at every step).
   const bool noslip_on_demand = spec.physics.noslip_scope == "resting" && spec.physics.noslip_iterations > 0;

@@ -147,6 +147,8 @@ void SceneSpec::Validate() const {
   Require(physics.robot_solmix > 0, "physics.robot_solmix", physics.robot_solmix, "> 0");
   Require(physics.tolerance > 0, "physics.tolerance", physics.tolerance, "> 0");
   Require(physics.iterations >= 1, "physics.iterations", physics.iterations, ">= 1");
+  Require(physics.max_contacts >= 1, "physics.max_contacts", physics.max_contacts, ">= 1");
+  Require(physics.max_constraint_rows >= 1, "physics.max_constraint_rows", physics.max_constraint_rows, ">= 1");
   Require(physics.settle_time >= 0 && physics.settle_time <= 10, "physics.settle_time",
           physics.settle_time, "in [0, 10] s");
   Require(physics.sleep_window >= 0 && physics.sleep_window <= 10, "physics.sleep_window", physics.sleep_window,
@@ -223,6 +225,8 @@ SceneSpec ParseSceneSpec(std::string_view json_text, std::string_view source) {
     r.Number("tolerance", spec.physics.tolerance);
     r.Integer("iterations", spec.physics.iterations);
     r.Number("settle_time", spec.physics.settle_time);
+    r.Integer("max_contacts", spec.physics.max_contacts);
+    r.Integer("max_constraint_rows", spec.physics.max_constraint_rows);
     r.Number("sleep_window", spec.physics.sleep_window);
     r.Number("sleep_tolerance", spec.physics.sleep_tolerance);
     r.Number("wake_margin", spec.physics.wake_margin);

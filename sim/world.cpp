@@ -358,13 +358,18 @@ struct World::Impl {
   // finds the step unstable).
   void CheckWarnings(double t_before) {
     if (!status.ok) return;
+    // An overflow of the contact or constraint room drops contacts: objects would pass through
+    // each other unnoticed (PhysicsSpec::max_contacts, max_constraint_rows).
     static constexpr int kFatal[] = {mjWARN_BADQPOS, mjWARN_BADQVEL, mjWARN_BADQACC,
-                                     mjWARN_BADCTRL};
+                                     mjWARN_BADCTRL, mjWARN_CONTACTFULL, mjWARN_CNSTRFULL};
     for (int w : kFatal) {
       if (d->warning[w].number > 0) {
         status.ok = false;
         status.message = Cat("MuJoCo reported ", mju_warningText(w, d->warning[w].lastinfo),
-                             " stepping from t = ", t_before, " s");
+                             " stepping from t = ", t_before, " s",
+                             w == mjWARN_CONTACTFULL   ? " (raise physics.max_contacts in the scene file)"
+                             : w == mjWARN_CNSTRFULL ? " (raise physics.max_constraint_rows in the scene file)"
+                                                     : "");
         return;
       }
     }

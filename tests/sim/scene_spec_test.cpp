@@ -41,8 +41,11 @@ TEST(SceneSpecTest, OverridesFields) {
   const SceneSpec spec = ParseSceneSpec(
       R"({"rack": {"incline_deg": 20}, "ball": {"radius": 0.04}, "tools": {"choices": ["hoe_1"]},
           "physics": {"noslip_tolerance": 1e-4, "solver": "CG", "jacobian": "sparse", "tolerance": 1e-6,
-                      "iterations": 50, "robot_solimp": [0.95, 0.99, 0.002], "robot_solmix": 10}})",
+                      "iterations": 50, "robot_solimp": [0.95, 0.99, 0.002], "robot_solmix": 10,
+                      "max_contacts": 40, "max_constraint_rows": 300}})",
       "inline");
+  EXPECT_EQ(spec.physics.max_contacts, 40);
+  EXPECT_EQ(spec.physics.max_constraint_rows, 300);
   EXPECT_DOUBLE_EQ(spec.physics.noslip_tolerance, 1e-4);
   EXPECT_EQ(spec.physics.robot_solimp, Eigen::Vector3d(0.95, 0.99, 0.002));
   EXPECT_DOUBLE_EQ(spec.physics.robot_solmix, 10);
@@ -75,6 +78,8 @@ TEST(SceneSpecTest, MalformedInputNamesSourceAndField) {
       {R"({"robot_solmix": 0})", "physics.robot_solmix"},
       {R"({"tolerance": -1e-6})", "physics.tolerance"},
       {R"({"iterations": 0})", "physics.iterations"},
+      {R"({"max_contacts": 0})", "physics.max_contacts"},
+      {R"({"max_constraint_rows": -5})", "physics.max_constraint_rows"},
       {R"({"sleep_window": -1})", "physics.sleep_window"},
       {R"({"wake_margin": 0})", "physics.wake_margin"},
   };

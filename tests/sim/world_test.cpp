@@ -326,6 +326,33 @@ TEST(SimRobotTest, WaitThrowsOnceThePhysicsIsUnstable) {
   EXPECT_FALSE(world.status().ok);
 }
 
+// Too little room for the contacts or constraint rows of a step stops the simulation and names
+// the scene field to raise; MuJoCo alone would drop the contacts that do not fit and go on.
+TEST_F(WorldTest, AStepWithMoreContactsThanThereIsRoomForStopsNamingTheField) {
+  // The default room holds a three-tool scene's contacts as it settles (awake: sleepers leave
+  // the contact solve).
+  const std::vector<ToolPlacement> three = {{"hoe_1", "pos1"}, {"rake_2", "pos2"}, {"stick_1", "pos3"}};
+  const SceneSpec awake = Awake();
+  World roomy(Compose(3, three, &awake).mjcf, "roomy");
+  roomy.Advance(0.5);
+  EXPECT_TRUE(roomy.status().ok) << roomy.status().message;
+  EXPECT_GT(roomy.num_contacts(), 2);
+
+  SceneSpec few_contacts = *spec_;
+  few_contacts.physics.max_contacts = 2;
+  World world(Compose(3, three, &few_contacts).mjcf, "two contacts");
+  world.Advance(0.5);
+  EXPECT_FALSE(world.status().ok);
+  EXPECT_THAT(world.status().message, HasSubstr("physics.max_contacts"));
+
+  SceneSpec few_rows = *spec_;
+  few_rows.physics.max_constraint_rows = 8;
+  World rows(Compose(3, three, &few_rows).mjcf, "eight rows");
+  rows.Advance(0.5);
+  EXPECT_FALSE(rows.status().ok);
+  EXPECT_THAT(rows.status().message, HasSubstr("physics.max_constraint_rows"));
+}
+
 TEST_F(WorldTest, BadTargetsAreRejected) {
   World world(Compose(1).mjcf, "bad");
   EXPECT_THAT([&] { world.SetJointTargets(Eigen::VectorXd::Zero(2)); },
