@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "app/bench_pull.h"
 #include "app/episode.h"
@@ -122,9 +124,19 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     c.params = {{"scene_seed", DeriveSeed(request.seed, "random/" + std::to_string(i))}};
     cases.push_back(c);
   }
+  // What every episode shares (library, perception's models, affordance model) is loaded once,
+  // here, before the children fork: each starts with it (EpisodeResources).
+  std::shared_ptr<const EpisodeResources> resources;
+  auto prepare = [&](const std::vector<SweepCase>&) {
+    EpisodeRequest any;
+    any.scene = BenchScene(request, 0);
+    resources = std::make_shared<const EpisodeResources>(LoadEpisodeResources(any));
+    spdlog::info("random: library and models loaded in {:.2f} s", resources->load_ms / 1000);
+  };
   auto run_case = [&](const SweepCase& c) {
     EpisodeRequest episode;
     episode.scene = BenchScene(request, c.params["scene_seed"].get<std::uint64_t>());
+    episode.resources = resources;
     episode.quiet = true;
     episode.best_tool_only = request.best_tool_only;
     episode.check_action_before_grasp = request.check_action_before_grasp;
@@ -142,7 +154,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   info["hindsight"] = request.hindsight;
   info["best_tool_only"] = request.best_tool_only;
   info["check_action_before_grasp"] = request.check_action_before_grasp;
-  ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case));
+  ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case, prepare));
   return 0;
 }
 
@@ -153,7 +165,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   std::map<std::string, std::vector<double>> stage_physics_ms;
   std::vector<std::string> stage_order;  // as the episodes ran them (first seen first)
   std::map<std::string, int> failures;
-  std::vector<double> wall_s, robot_s, physics_s, displacement;
+  std::vector<double> wall_s, cpu_s, robot_s, physics_s, displacement;
   std::vector<double> drift_deg, drift_m;  // the tool's turn in the grip where the pull's drag starts
   std::vector<double> chance;  // per scored choice: 1 / tools on the rack (a random pick's agreement)
   std::map<std::string, int> help_reasons;  // assisted episodes by HelpReason
@@ -193,6 +205,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
     count("ball_grasp_success", r.value("ball_grasp_success", false));
     count("completed", r.value("failure", std::string()).empty());
     wall_s.push_back(r.value("wall_s", 0.0));
+    if (r.contains("cpu_s")) cpu_s.push_back(r["cpu_s"].get<double>());  // since session 44
     robot_s.push_back(r.value("robot_s", 0.0));
     double physics_ms = 0.0;
     for (const auto& s : r["stages"]) {
@@ -231,6 +244,7 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
   summary["achieved_displacement_m_median"] = Percentile(displacement, 50);
   summary["wall_s_median"] = Percentile(wall_s, 50);
   summary["wall_s_p90"] = Percentile(wall_s, 90);
+  if (!cpu_s.empty()) summary["cpu_s_median"] = Percentile(cpu_s, 50);
   summary["robot_s_median"] = Percentile(robot_s, 50);
   summary["physics_s_median"] = Percentile(physics_s, 50);  // wall time inside mj_step
   // Ground truth, for scoring: how far the tool had turned in the grip since the inspection when
@@ -272,8 +286,9 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
                       Percentile(stage_robot_s[name], 50));
   }
   md << fmt::format("\nWall time per episode: median {:.1f} s, p90 {:.1f} s; of it physics (mj_step) {:.1f} s; "
-                    "robot (simulated) time {:.1f} s.\n",
-                    Percentile(wall_s, 50), Percentile(wall_s, 90), Percentile(physics_s, 50), Percentile(robot_s, 50));
+                    "robot (simulated) time {:.1f} s{}.\n",
+                    Percentile(wall_s, 50), Percentile(wall_s, 90), Percentile(physics_s, 50), Percentile(robot_s, 50),
+                    cpu_s.empty() ? std::string() : fmt::format("; CPU time (every thread) {:.1f} s", Percentile(cpu_s, 50)));
   if (!drift_deg.empty()) {
     md << fmt::format("\nThe tool's turn in the grip since the inspection where the drag started (ground truth, "
                       "{} pulls): median {:.1f} deg (p90 {:.1f}), the effector {:.1f} mm off the plan's.\n",

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -384,6 +385,13 @@ int RunTable53Bench(const BenchRequest& request) {
   thesis_options.classifier_file = DefaultClassifierPath();
   const perception::ToolAnalyzer ours(base.library, ours_options);
   const perception::ToolAnalyzer thesis(base.library, thesis_options);
+  // Episodes: what they share (library, perception's models, affordance model), loaded once.
+  std::shared_ptr<const EpisodeResources> resources;
+  if (episodes) {
+    EpisodeRequest any;
+    any.scene = library_request;
+    resources = std::make_shared<const EpisodeResources>(LoadEpisodeResources(any));
+  }
   auto model_of = [&](const std::string& tool) {
     for (const auto& m : base.library) {
       if (m.name == tool) return &m;
@@ -425,6 +433,7 @@ int RunTable53Bench(const BenchRequest& request) {
     episode.scene = BenchScene(request, DeriveSeed(request.seed, "table53/" + c.id));
     episode.scene.tools = {tool};
     episode.scene.cells = {cell};
+    episode.resources = resources;
     episode.quiet = true;
     if (request.frames) episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
     const EpisodeResult r = RunEpisode(episode);
@@ -469,6 +478,7 @@ int RunTable53Bench(const BenchRequest& request) {
     models.erase(std::unique(models.begin(), models.end()), models.end());
     const auto start = std::chrono::steady_clock::now();
     ours.PrepareShapes(models);
+    if (resources) resources->analyzer->PrepareShapes(models);
     spdlog::info("table53: shapes of {} model(s) ready in {:.1f} s", models.size(),
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   };

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <cstdio>
 #include <limits>
 #include <optional>
@@ -40,6 +41,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 double Ms(Clock::time_point since) { return std::chrono::duration<double, std::milli>(Clock::now() - since).count(); }
+
+// CPU time of this process so far, every thread, user and system [s].
+double ProcessCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 nlohmann::json Vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
@@ -192,20 +200,39 @@ cv::Mat DrawBall(const RgbdFrame& frame, const perception::BallDetection& ball) 
 
 std::filesystem::path DefaultAffordanceModelPath() { return AssetsDir() / "models" / "affordance_model.json"; }
 
+EpisodeResources LoadEpisodeResources(const EpisodeRequest& request) {
+  const auto start = Clock::now();
+  EpisodeResources resources;
+  resources.assets = LoadSceneAssets(request.scene.scene_file, request.scene.extra_tool_dirs);
+  resources.analyzer = std::make_shared<const perception::ToolAnalyzer>(resources.assets.library, DefaultAnalyzerOptions());
+  resources.affordance_file = request.affordance_model;
+  if (std::filesystem::exists(request.affordance_model)) {
+    resources.affordance = AffordanceModel::Load(request.affordance_model);
+  }
+  resources.load_ms = Ms(start);
+  return resources;
+}
+
 EpisodeResult RunEpisode(const EpisodeRequest& request) {
   const std::optional<control::ToolAction> action = control::ParseToolAction(request.action);
   if (!action) {
     ThrowInvalid("episode: unknown action '", request.action, "' (expected pull, drag-left, drag-right or push)");
   }
+  std::shared_ptr<const EpisodeResources> resources = request.resources;
+  if (!resources) {
+    resources = std::make_shared<const EpisodeResources>(LoadEpisodeResources(request));
+  } else if (resources->affordance_file != request.affordance_model) {
+    ThrowInvalid("episode: the affordance model '", request.affordance_model.string(),
+                 "' was asked for, but the resources were loaded with '", resources->affordance_file.string(), "'");
+  }
   // The learned affordance model; the geometric predictor only when there is no model file.
-  std::optional<AffordanceModel> affordance;
+  const AffordanceModel* affordance = resources->affordance ? &*resources->affordance : nullptr;
   std::string choice_note;
-  if (std::filesystem::exists(request.affordance_model)) {
-    affordance = AffordanceModel::Load(request.affordance_model);
+  if (affordance) {
     choice_note = request.affordance_model.string();
     if (!affordance->HasAction(request.action)) {
       // A model explored without this action knows nothing about it: as good as no model.
-      affordance.reset();
+      affordance = nullptr;
       choice_note = "the affordance model '" + request.affordance_model.string() + "' has no '" + request.action +
                     "' trials: geometric predictor";
     }
@@ -213,15 +240,17 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     choice_note = "no affordance model at '" + request.affordance_model.string() + "': geometric predictor";
   }
   const auto episode_start = Clock::now();
+  const double cpu_start = ProcessCpuSeconds();
   EpisodeResult result;
   result.seed = request.scene.seed;
   result.action = request.action;
   result.choice_method = affordance ? "learned" : "geometric";
   result.choice_note = choice_note;
+  result.resources_ms = request.resources ? 0.0 : resources->load_ms;
   if (!request.out_dir.empty()) std::filesystem::create_directories(request.out_dir);
 
   // ---- Setup: scene, world, robot, eyes. ----
-  LoadedScene scene = LoadScene(request.scene);
+  LoadedScene scene = ComposeFromAssets(request.scene, resources->assets);
   if (scene.composed.tools.empty()) ThrowInvalid("episode: the rack is empty (no tool in the scene)");
   // The GL context first: the renderers (the film's among them) must be destroyed before it.
   sim::GlContext gl;
@@ -304,6 +333,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       result.truth["tools"].push_back({{"name", placed.name}, {"cell", placed.cell}, {"body", placed.body}});
     }
     result.wall_s = Ms(episode_start) / 1000.0;
+    result.cpu_s = ProcessCpuSeconds() - cpu_start;
     result.robot_s = robot.Time();
     if (!request.out_dir.empty()) WriteJson(request.out_dir / "result.json", EpisodeJson(result));
     return result;
@@ -416,7 +446,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // ---- 3. Turn to the rack and analyse every tool. ----
     perception::FrameAnalysis analysis;
     RgbdFrame rack_frame;
-    const perception::ToolAnalyzer analyzer(scene.library, DefaultAnalyzerOptions());
+    const perception::ToolAnalyzer& analyzer = *resources->analyzer;
     const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec), /*arm_down=*/true, free_look);
       rack_frame = see();
@@ -971,6 +1001,8 @@ nlohmann::json EpisodeJson(const EpisodeResult& r) {
   j["achieved_displacement_R"] = {r.achieved_displacement_R.x(), r.achieved_displacement_R.y()};
   j["failure"] = r.failure;
   j["wall_s"] = r.wall_s;
+  j["resources_ms"] = r.resources_ms;
+  j["cpu_s"] = r.cpu_s;
   j["robot_s"] = r.robot_s;
   j["stages"] = nlohmann::json::array();
   for (const StageRecord& s : r.stages) {
@@ -1002,9 +1034,12 @@ std::string EpisodeSummary(const EpisodeResult& r) {
   out << fmt::format("  chosen tool {} ({} choice, predicted {:.2f} m), ball moved {:.2f} m along the {}\n",
                      r.chosen_tool.empty() ? "-" : r.chosen_tool, r.choice_method, r.predicted_displacement_m,
                      r.achieved_displacement_m, r.action);
-  out << fmt::format("  grasp {}  pull {}  ball grasp {}{}  |  {:.1f} s wall, {:.1f} s robot\n",
+  out << fmt::format("  grasp {}  pull {}  ball grasp {}{}  |  {:.1f} s wall{}, {:.1f} s robot\n",
                      r.grasp_success ? "yes" : "no", r.pull_success ? "yes" : "no", r.ball_grasp_success ? "yes" : "no",
-                     r.assisted ? "  (assisted: hand-over)" : "", r.wall_s, r.robot_s);
+                     r.assisted ? "  (assisted: hand-over)" : "", r.wall_s,
+                     r.resources_ms > 0 ? fmt::format(" (+ {:.1f} s loading the library and models)", r.resources_ms / 1000)
+                                        : std::string(),
+                     r.robot_s);
   return out.str();
 }
 

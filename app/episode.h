@@ -2,12 +2,15 @@
 
 #include <cmath>
 #include <filesystem>
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include "app/affordance.h"
 #include "app/scene_setup.h"
 #include "perception/analysis.h"
 
@@ -15,6 +18,26 @@ namespace toolbench::app {
 
 /// The shipped affordance model: assets/models/affordance_model.json.
 std::filesystem::path DefaultAffordanceModelPath();
+
+/// What the episodes of a run share and only read: the scene file, the robot and the tool library
+/// (SceneAssets), perception's analyzer of that library (its recogniser and classifier) and the
+/// affordance model. Loading them costs ~0.25 s, a twentieth of an episode, the same for every
+/// episode: a bench loads them once before its child processes fork, so that each starts with
+/// them (EpisodeRequest::resources). Nothing here depends on the seed.
+struct EpisodeResources {
+  SceneAssets assets;
+  std::shared_ptr<const perception::ToolAnalyzer> analyzer;  // ToolAnalyzer(assets.library, DefaultAnalyzerOptions())
+  std::filesystem::path affordance_file;                      // as requested
+  std::optional<AffordanceModel> affordance;                  // empty when affordance_file does not exist
+  double load_ms = 0.0;                                       // wall time of LoadEpisodeResources [ms]
+};
+
+struct EpisodeRequest;
+
+/// Loads the resources of `request` (its scene file, user tool folders and affordance model).
+/// Throws std::invalid_argument naming the bad input (malformed scene, broken user mesh, a
+/// classifier made for another library, an affordance model file that exists but is malformed).
+EpisodeResources LoadEpisodeResources(const EpisodeRequest& request);
 
 /// What `toolbench episode` was asked to do.
 struct EpisodeRequest {
@@ -40,6 +63,10 @@ struct EpisodeRequest {
   /// robot then asks for it again, the re-grip). false: no check (the code before session 22).
   bool check_action_before_grasp = true;
   bool noise = true;              // sensor noise model on
+  /// Loaded for this request's scene file, user tool folders and affordance model (RunEpisode
+  /// checks, and throws std::invalid_argument when they were loaded for others); null: RunEpisode
+  /// loads them itself (EpisodeResult::resources_ms).
+  std::shared_ptr<const EpisodeResources> resources;
 };
 
 /// One stage of the episode (thesis Alg. 6).
@@ -87,7 +114,15 @@ struct EpisodeResult {
   double achieved_displacement_m = 0.0;
   Eigen::Vector2d achieved_displacement_R = Eigen::Vector2d::Zero();  // truth: (dx, dy) in R [m]
   std::string failure;                    // first failed stage: "<stage>: <reason>", empty on success
+  /// Wall time of the episode, from composing its scene to its end [s]; the resources shared by a
+  /// run's episodes (EpisodeResources) are not in it, see resources_ms.
   double wall_s = 0.0;
+  /// Wall time spent loading the EpisodeResources for this episode [ms]; 0 when the request
+  /// brought them (a bench loads them once for all its episodes).
+  double resources_ms = 0.0;
+  /// CPU time of the process over the same span, all its threads [s]: a measure of the work that
+  /// other load on a shared machine disturbs less than wall_s.
+  double cpu_s = 0.0;
   double robot_s = 0.0;
   nlohmann::json truth = nlohmann::json::object();  // ground truth used for scoring
   /// What perceive_tools saw of the rack (empty when the stage did not run): for benchmarks that

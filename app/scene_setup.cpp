@@ -44,12 +44,28 @@ std::vector<toollib::ToolModel> LoadLibraries(const sim::SceneSpec& spec,
   return library;
 }
 
-LoadedScene LoadScene(const SceneRequest& request) {
-  LoadedScene loaded;
+SceneAssets LoadSceneAssets(const std::filesystem::path& scene_file,
+                            const std::vector<std::filesystem::path>& extra_tool_dirs) {
+  SceneAssets assets;
+  assets.scene_file = scene_file.empty() ? sim::DefaultScenePath() : scene_file;
+  assets.extra_tool_dirs = extra_tool_dirs;
+  assets.spec = sim::LoadSceneSpec(assets.scene_file);
+  assets.robot = robot::LoadRobotDescription(AssetsDir() / assets.spec.robot);
+  assets.library = LoadLibraries(assets.spec, extra_tool_dirs);
+  return assets;
+}
+
+LoadedScene ComposeFromAssets(const SceneRequest& request, SceneAssets assets) {
   const std::filesystem::path scene_file = request.scene_file.empty() ? sim::DefaultScenePath() : request.scene_file;
-  loaded.spec = sim::LoadSceneSpec(scene_file);
-  loaded.robot = robot::LoadRobotDescription(AssetsDir() / loaded.spec.robot);
-  loaded.library = LoadLibraries(loaded.spec, request.extra_tool_dirs);
+  if (scene_file != assets.scene_file || request.extra_tool_dirs != assets.extra_tool_dirs) {
+    ThrowInvalid("ComposeFromAssets: the scene asks for '", scene_file.string(), "' with ",
+                 request.extra_tool_dirs.size(), " user tool folder(s), but the assets were loaded from '",
+                 assets.scene_file.string(), "' with ", assets.extra_tool_dirs.size());
+  }
+  LoadedScene loaded;
+  loaded.spec = std::move(assets.spec);
+  loaded.robot = std::move(assets.robot);
+  loaded.library = std::move(assets.library);
 
   std::vector<sim::ToolPlacement> placements;
   if (!request.cells.empty() && request.cells.size() != request.tools.size()) {
@@ -71,6 +87,10 @@ LoadedScene LoadScene(const SceneRequest& request) {
   const sim::ScenePlan plan = sim::PlanScene(loaded.spec, names, request.seed, placements);
   loaded.composed = sim::ComposeScene(loaded.spec, loaded.robot, loaded.library, plan);
   return loaded;
+}
+
+LoadedScene LoadScene(const SceneRequest& request) {
+  return ComposeFromAssets(request, LoadSceneAssets(request.scene_file, request.extra_tool_dirs));
 }
 
 Eigen::VectorXd ModelQ(const robot::RobotDescription& robot, const std::vector<std::string>& names,

@@ -35,9 +35,28 @@ struct LoadedScene {
   sim::ComposedScene composed;
 };
 
-/// Loads the scene file, the robot, the tool library (assets plus user folders; a name defined
-/// twice is an error) and composes the MJCF. Tools without cells get pos1, pos2, pos3 in order
-/// (a single tool gets pos2). Throws std::invalid_argument naming the bad input.
+/// The files a scene is composed from: the scene file, the robot and the tool library (assets
+/// plus user folders). Every scene of a run shares them: a sweep loads them once (~0.1 s, most of
+/// it the library's meshes) and composes each of its scenes from them.
+struct SceneAssets {
+  std::filesystem::path scene_file;                    // the file loaded (never empty)
+  std::vector<std::filesystem::path> extra_tool_dirs;  // as requested
+  sim::SceneSpec spec;
+  robot::RobotDescription robot;
+  std::vector<toollib::ToolModel> library;
+};
+
+/// Loads the scene file (empty = scenes/default.json), the robot and the tool library (a name
+/// defined twice is an error). Throws std::invalid_argument naming the bad input.
+SceneAssets LoadSceneAssets(const std::filesystem::path& scene_file,
+                            const std::vector<std::filesystem::path>& extra_tool_dirs);
+
+/// Composes the request's scene from `assets`, which must have been loaded for its scene file
+/// and user tool folders (else std::invalid_argument). Tools without cells get pos1, pos2, pos3
+/// in order (a single tool gets pos2). Throws std::invalid_argument naming the bad input.
+LoadedScene ComposeFromAssets(const SceneRequest& request, SceneAssets assets);
+
+/// LoadSceneAssets for the request, then ComposeFromAssets.
 LoadedScene LoadScene(const SceneRequest& request);
 
 /// Loads every tool folder of the scene plus `extra_dirs`; throws on duplicates or bad files.

@@ -236,7 +236,8 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
   std::ifstream in(dir / "result.json");
   const nlohmann::json result = nlohmann::json::parse(in);
   for (const char* key : {"grasp_success", "pull_success", "ball_grasp_success", "assisted", "chosen_tool",
-                          "predicted_displacement_m", "achieved_displacement_m", "stages", "wall_s", "truth"}) {
+                          "predicted_displacement_m", "achieved_displacement_m", "stages", "wall_s", "resources_ms",
+                          "cpu_s", "truth"}) {
     EXPECT_TRUE(result.contains(key)) << key;
   }
   // The default scene runs the noslip pass only while a tool rests on the rack awake: in the grasp
@@ -352,6 +353,37 @@ TEST(CliTest, AnEpisodeTakesTheNextBestToolWhenTheFirstChoiceIsOutOfReach) {
   EXPECT_EQ(thesis_grasp["outcome"], "handed_over");
   EXPECT_EQ(thesis["chosen_tool"], tried[0]["model"]);
   EXPECT_TRUE(thesis["assisted"].get<bool>());
+}
+
+// A bench loads the library and the models once, before its child processes fork
+// (EpisodeResources); its episode of a seed is the episode `toolbench episode` runs alone.
+TEST(CliTest, ABenchEpisodeIsTheEpisodeOfItsSeedRunAlone) {
+  const auto bench_dir = TempDir("bench_episode_2");
+  const CliRun b = Toolbench("bench --protocol random --episodes 3 --seed 1 --filter '^episode/2$' --out " +
+                             bench_dir.string());
+  ASSERT_EQ(b.code, 0) << b.output;
+  std::ifstream lines(bench_dir / "results.jsonl");
+  std::string line;
+  ASSERT_TRUE(std::getline(lines, line));
+  const nlohmann::json in_bench = nlohmann::json::parse(line)["result"];
+  ASSERT_EQ(std::to_string(in_bench["seed"].get<std::uint64_t>()), kUnreachableFirstChoiceSeed);
+
+  const auto dir = TempDir("episode_alone");
+  const CliRun r = Toolbench(std::string("episode --seed ") + kUnreachableFirstChoiceSeed + " --out " + dir.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("loading the library and models"));
+  const nlohmann::json alone = ReadResult(dir);
+  EXPECT_GT(alone["resources_ms"].get<double>(), 0.0);
+  EXPECT_EQ(in_bench["resources_ms"].get<double>(), 0.0);
+  EXPECT_GT(alone["cpu_s"].get<double>(), 0.0);
+  // Bit for bit: the same robot time, the ball where it ended, every stage's outcome.
+  EXPECT_EQ(alone["robot_s"], in_bench["robot_s"]);
+  EXPECT_EQ(alone["truth"]["ball_end_R"], in_bench["truth"]["ball_end_R"]);
+  EXPECT_EQ(alone["chosen_tool"], in_bench["chosen_tool"]);
+  ASSERT_EQ(alone["stages"].size(), in_bench["stages"].size());
+  for (size_t i = 0; i < alone["stages"].size(); ++i) {
+    EXPECT_EQ(alone["stages"][i]["outcome"], in_bench["stages"][i]["outcome"]) << alone["stages"][i]["name"];
+  }
 }
 
 TEST(CliTest, EpisodeBadInputIsNamed) {
