@@ -26,10 +26,9 @@ constexpr double kMinDamping = 1e-9;
 constexpr double kMaxDamping = 1e4;
 // Largest joint change of one rest-refinement step [rad]: keeps the linearisation valid.
 constexpr double kMaxRestStep = 0.2;
-// Longest chain the solver takes: the pre-solve's normal equations live in fixed-capacity
-// matrices (no heap, no size dispatch in the hot loop).
+// Longest chain the solver takes: the pre-solve's steps live in fixed-capacity vectors (no heap
+// in the hot loop).
 constexpr int kMaxChainJoints = 16;
-using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxChainJoints, kMaxChainJoints>;
 using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxChainJoints, 1>;
 
 // First primes, for the Halton restart points (one base per chain joint, cycled beyond ten).
@@ -46,38 +45,41 @@ double Halton(int index, int base) {
   return r;
 }
 
-// Solves H x = g for a symmetric positive definite H (at most kMaxChainJoints rows) by a
-// Cholesky factorisation on the stack; false when H is not numerically positive definite.
-// Hand-written: at n = 10 Eigen's LDLT and LLT spend more on their per-column block bookkeeping
-// than on the arithmetic. BM_PlanPull (near ball, one plan, ~1.1M factorisations): 1234 ms with
-// the pivoting LDLT on heap matrices, 996 ms with Eigen's LLT on fixed-capacity ones, 849 ms with
-// this and KinematicChain's coordinate-axis joints.
-bool SolveSpd(const SmallMatrix& H, const SmallVector& g, SmallVector& x) {
-  const int n = static_cast<int>(H.rows());
-  double L[kMaxChainJoints][kMaxChainJoints];
-  double inv_diag[kMaxChainJoints];  // 1 / L(j, j): one division per column
-  for (int j = 0; j < n; ++j) {
-    double d = H(j, j);
+using Matrix6 = Eigen::Matrix<double, 6, 6>;
+using Vector6 = Eigen::Matrix<double, 6, 1>;
+
+// The damped least-squares step dq = Jw^T (A + damping I)^-1 ew for A = Jw Jw^T, by a 6 x 6
+// Cholesky factorisation written out with its sizes known at compile time; false when
+// A + damping I is not numerically positive definite. BM_PlanPull (path Ipopt off), CPU of one
+// plan, run by turns with the n x n primal (a hand-written 10 x 10 Cholesky of J^T J + damping):
+// near ball 518-646 -> 402-408 ms, far 625-678 -> 502-532 ms (Eigen's LLT for this 6 x 6: far
+// 552-601 ms, its generic loops cost more than the arithmetic).
+bool DampedStep(const Matrix6& A, const ChainJacobian& Jw, const Vector6& ew, double damping, SmallVector& dq) {
+  double L[6][6];
+  double inv_diag[6];  // 1 / L(j, j)
+  for (int j = 0; j < 6; ++j) {
+    double d = A(j, j) + damping;
     for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
     if (!(d > 0.0)) return false;
     inv_diag[j] = 1.0 / std::sqrt(d);
-    for (int i = j + 1; i < n; ++i) {
-      double v = H(i, j);
+    for (int i = j + 1; i < 6; ++i) {
+      double v = A(i, j);
       for (int k = 0; k < j; ++k) v -= L[i][k] * L[j][k];
       L[i][j] = v * inv_diag[j];
     }
   }
-  x.resize(n);
-  for (int i = 0; i < n; ++i) {  // L y = g
-    double v = g[i];
-    for (int k = 0; k < i; ++k) v -= L[i][k] * x[k];
-    x[i] = v * inv_diag[i];
+  double y[6];
+  for (int i = 0; i < 6; ++i) {  // L z = ew
+    double v = ew[i];
+    for (int k = 0; k < i; ++k) v -= L[i][k] * y[k];
+    y[i] = v * inv_diag[i];
   }
-  for (int i = n - 1; i >= 0; --i) {  // L^T x = y
-    double v = x[i];
-    for (int k = i + 1; k < n; ++k) v -= L[k][i] * x[k];
-    x[i] = v * inv_diag[i];
+  for (int i = 5; i >= 0; --i) {  // L^T y = z
+    double v = y[i];
+    for (int k = i + 1; k < 6; ++k) v -= L[k][i] * y[k];
+    y[i] = v * inv_diag[i];
   }
+  dq.noalias() = Jw.transpose() * Eigen::Map<const Vector6>(y);
   return true;
 }
 
@@ -298,10 +300,11 @@ struct CartesianSolver::Impl {
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app;
   // Pre-solve workspace (no allocation per iteration).
   ChainJacobian J;
-  SmallMatrix H;
-  SmallMatrix H_active;
-  SmallVector g;
-  SmallVector g_active;
+  ChainJacobian Jw;         // J with its orientation rows weighted by orientation_length_m
+  ChainJacobian Jw_active;  // Jw with the columns of joints frozen at a limit zeroed
+  Matrix6 A;                // Jw Jw^T
+  Matrix6 A_active;         // Jw_active Jw_active^T
+  Vector6 ew;               // [e_p; L e_r]
   SmallVector dq;
   Eigen::VectorXd q_try;
 
@@ -337,40 +340,39 @@ struct CartesianSolver::Impl {
         window_cost = cost;
       }
       ++iterations;
-      // Normal equations of the weighted residual [e_p; L e_r] (rows of J weighted alike).
-      // (lazyProduct: at this size Eigen's blocked matrix product costs more than the arithmetic.)
-      H.noalias() = J.topRows<3>().transpose().lazyProduct(J.topRows<3>());
-      H.noalias() += (L * L) * J.bottomRows<3>().transpose().lazyProduct(J.bottomRows<3>());
-      g.noalias() = J.topRows<3>().transpose() * e.e_p;
-      g.noalias() += (L * L) * (J.bottomRows<3>().transpose() * e.e_r);
+      // The LM step on the weighted residual ew = [e_p; L e_r] (Jw: J's rows weighted alike),
+      // dq = (Jw^T Jw + damping I)^-1 Jw^T ew, solved in its dual form
+      // dq = Jw^T (Jw Jw^T + damping I)^-1 ew (the same step, by the push-through identity): a
+      // 6 x 6 factorisation instead of an n x n one, whose n - 6 null directions hold nothing
+      // but the damping (down to kMinDamping).
+      Jw = J;
+      Jw.bottomRows<3>() *= L;
+      ew << e.e_p, L * e.e_r;
+      A.noalias() = Jw.lazyProduct(Jw.transpose());
       bool improved = false;
       while (damping <= kMaxDamping) {
-        H.diagonal().array() += damping;
-        if (!SolveSpd(H, g, dq)) {  // numerically indefinite: damp more
-          H.diagonal().array() -= damping;
+        if (!DampedStep(A, Jw, ew, damping, dq)) {  // numerically indefinite: damp more
           damping *= 4.0;
           continue;
         }
-        // Projected Newton: joints at a limit that the step pushes outward are frozen and the
-        // step re-solved without them; clamping alone stalls LM against the limits.
+        // Projected Newton: joints at a limit that the step pushes outward are frozen (their
+        // columns of Jw zeroed) and the step re-solved without them; clamping alone stalls LM
+        // against the limits.
         bool frozen = false;
-        H_active = H;
-        g_active = g;
         for (int i = 0; i < n; ++i) {
           if ((q[i] <= chain.lower()[i] && dq[i] < 0) || (q[i] >= chain.upper()[i] && dq[i] > 0)) {
-            H_active.row(i).setZero();
-            H_active.col(i).setZero();
-            H_active(i, i) = 1.0;
-            g_active[i] = 0.0;
+            if (!frozen) Jw_active = Jw;
+            Jw_active.col(i).setZero();
             frozen = true;
           }
         }
-        if (frozen && !SolveSpd(H_active, g_active, dq)) {
-          H.diagonal().array() -= damping;
-          damping *= 4.0;
-          continue;
+        if (frozen) {
+          A_active.noalias() = Jw_active.lazyProduct(Jw_active.transpose());
+          if (!DampedStep(A_active, Jw_active, ew, damping, dq)) {
+            damping *= 4.0;
+            continue;
+          }
         }
-        H.diagonal().array() -= damping;
         q_try = (q + dq).cwiseMax(chain.lower()).cwiseMin(chain.upper());
         Eigen::Isometry3d X_try;
         chain.Evaluate(q_try, &X_try, nullptr);
@@ -463,10 +465,8 @@ CartesianSolver::CartesianSolver(const KinematicChain& chain, const Eigen::Vecto
     m.weights[i] = it != options.rest_weights.end() ? it->second : options.default_rest_weight;
   }
   m.J.resize(6, n);
-  m.H.resize(n, n);
-  m.H_active.resize(n, n);
-  m.g.resize(n);
-  m.g_active.resize(n);
+  m.Jw.resize(6, n);
+  m.Jw_active.resize(6, n);
   m.dq.resize(n);
   m.q_try.resize(n);
   m.nlp = new IkNlp(m.chain, m.weights, m.q_rest);

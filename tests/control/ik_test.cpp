@@ -110,6 +110,31 @@ TEST_F(IkTest, WithoutIpoptRescueFailuresAreReportedAtOnce) {
   EXPECT_GE(converged, 19);
 }
 
+// Goals whose postures hold joints at their limits: the pre-solve's steps freeze the joints they
+// push against a limit and go on with the others (alone, without Ipopt's rescue).
+TEST_F(IkTest, ThePresolveReachesPosturesWithJointsAtTheirLimits) {
+  IkOptions options;
+  options.ipopt_after_failed_presolve = false;
+  CartesianSolver solver(*chain_, robot_->HomeQ(), options);
+  Rng rng(DeriveSeed(1, "ik_test_limits"));
+  int converged = 0;
+  constexpr int kTrials = 40;
+  for (int trial = 0; trial < kTrials; ++trial) {
+    Eigen::VectorXd q_chain = chain_->ChainQ(RandomArmQ(rng));
+    for (int k = 0; k < 3; ++k) {
+      const int i = UniformInt(rng, 0, chain_->num_joints() - 1);
+      q_chain[i] = UniformReal(rng, 0.0, 1.0) < 0.5 ? chain_->lower()[i] : chain_->upper()[i];
+    }
+    const Eigen::Isometry3d X_RT = chain_->TipPose(chain_->ModelQ(robot_->HomeQ(), q_chain));
+    const IkResult r = solver.Solve(X_RT, robot_->HomeQ());
+    converged += r.status == IkStatus::kConverged ? 1 : 0;
+    const Eigen::VectorXd q = chain_->ChainQ(r.q);
+    EXPECT_TRUE((q.array() >= chain_->lower().array()).all() && (q.array() <= chain_->upper().array()).all())
+        << "trial " << trial << ": " << q.transpose();
+  }
+  EXPECT_GE(converged, kTrials - 4);
+}
+
 // A start that stalls far from an out-of-reach target is given up early: the same verdict in a
 // fraction of the LM iterations. Targets in reach converge to the same postures as without the
 // stall test (their starts never stall that far off).
