@@ -27,7 +27,8 @@ struct GroundTruth {
 
 /// Health of the simulation after stepping, from MuJoCo's warning counters.
 struct SimStatus {
-  bool ok = true;            // false once MuJoCo reported instability (NaN/Inf, bad QACC)
+  bool ok = true;            // false once MuJoCo reported instability (NaN/Inf, bad QACC) or ran
+                             // out of room for contacts or constraint rows (PhysicsSpec)
   std::string message;       // the first warning, empty when ok
 };
 
