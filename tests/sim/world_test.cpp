@@ -1,6 +1,7 @@
 #include "sim/world.h"
 
 #include <algorithm>
+#include <utility>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -338,19 +339,18 @@ TEST_F(WorldTest, AStepWithMoreContactsThanThereIsRoomForStopsNamingTheField) {
   EXPECT_TRUE(roomy.status().ok) << roomy.status().message;
   EXPECT_GT(roomy.num_contacts(), 2);
 
-  SceneSpec few_contacts = *spec_;
-  few_contacts.physics.max_contacts = 2;
-  World world(Compose(3, three, &few_contacts).mjcf, "two contacts");
-  world.Advance(0.5);
-  EXPECT_FALSE(world.status().ok);
-  EXPECT_THAT(world.status().message, HasSubstr("physics.max_contacts"));
-
-  SceneSpec few_rows = *spec_;
-  few_rows.physics.max_constraint_rows = 8;
-  World rows(Compose(3, three, &few_rows).mjcf, "eight rows");
-  rows.Advance(0.5);
-  EXPECT_FALSE(rows.status().ok);
-  EXPECT_THAT(rows.status().message, HasSubstr("physics.max_constraint_rows"));
+  // Room for 2 contacts, then for 8 constraint rows.
+  const std::pair<int PhysicsSpec::*, int> tight[] = {{&PhysicsSpec::max_contacts, 2},
+                                                      {&PhysicsSpec::max_constraint_rows, 8}};
+  const char* field[] = {"physics.max_contacts", "physics.max_constraint_rows"};
+  for (int k = 0; k < 2; ++k) {
+    SceneSpec spec = *spec_;
+    spec.physics.*tight[k].first = tight[k].second;
+    World world(Compose(3, three, &spec).mjcf, field[k]);
+    world.Advance(0.5);
+    EXPECT_FALSE(world.status().ok) << field[k];
+    EXPECT_THAT(world.status().message, HasSubstr(field[k]));
+  }
 }
 
 TEST_F(WorldTest, BadTargetsAreRejected) {
