@@ -149,8 +149,7 @@ GraspCaseResult RunGraspCase(const LoadedScene& scene, const std::string& tool, 
   control::GraspOptions grasp_options = options.grasp;
   grasp_options.obstacles = WorkspaceObstacles(scene.spec);
   if (options.slide_along_handle) {
-    grasp_options.handle_slide_m =
-        FreeHandleSlide(scene.robot, model->handle.length, options.slide_margin_m);
+    grasp_options.handle_slide = GripSlide(scene.robot, *model, model->handle, options.slide_margin_m);
   }
   // At each stage of the skill: where the true handle axis passes the hand's grasp cylinder, and
   // with frames, one picture per stage beside the final one (<stem>_<stage>.png).

@@ -22,8 +22,8 @@ struct GraspCaseOptions {
   double min_lift_m = 0.05;     // [m], > 0
   double max_slip_m = 0.005;    // [m], > 0
   double sample_period = 0.05;  // contact / slip sampling period during the hold [s], > 0
-  /// Let the grasp centre slide along the handle: sets grasp.handle_slide_m to (handle length -
-  /// grasp length) / 2 - slide_margin_m of the tool's model (the ground-truth handle segment).
+  /// Let the grasp centre slide along the handle: sets grasp.handle_slide to GripSlide of the
+  /// tool's model (the ground-truth handle segment, and the bar past it) with slide_margin_m.
   bool slide_along_handle = true;
   double slide_margin_m = 0.01;  // [m], >= 0
   /// Grasp as the episode does: after the look at the rack (LookAt RackViewTarget with the arm

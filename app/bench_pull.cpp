@@ -150,7 +150,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   control::GraspOptions grasp_options = options.grasp;
   grasp_options.obstacles = WorkspaceObstacles(scene.spec);
   out.grasp = control::GraspToolForAction(robot, scene.robot, X_RH, p_R_effector,
-                                          FreeHandleSlide(scene.robot, model->handle.length), grasp_options);
+                                          GripSlide(scene.robot, *model, model->handle), grasp_options);
   frame("1_grasp");
   if (out.grasp.status != control::GraspStatus::kGrasped) {
     return finish(std::string("grasp_") + control::ToString(out.grasp.status) + ": " + out.grasp.reason);

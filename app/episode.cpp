@@ -620,8 +620,18 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       grasp_options.on_stage = [&](const char* stage) { stage_frame(std::string("grasp_") + stage); };
       auto grasp = [&]() {
         const Eigen::Vector3d p_R_effector = tool->X_RT * model->effector.center;
-        return control::GraspToolForAction(robot, desc, tool->handle.X_FH, p_R_effector,
-                                           FreeHandleSlide(desc, tool->handle.length), grasp_options);
+        // Along the perceived handle, and past its end where the recognised model stays a bar
+        // like it (GripSlide); a tool not recognised is not its closest model: the handle only.
+        control::HandleSlide slide = control::HandleSlide::Symmetric(FreeHandleSlide(desc, tool->handle.length));
+        if (tool->known) {
+          const Eigen::Isometry3d X_TR = tool->X_RT.inverse();
+          toollib::Segment handle_T = model->handle;
+          handle_T.center = X_TR * tool->handle.center;
+          handle_T.axis = X_TR.linear() * tool->handle.axis;
+          handle_T.length = tool->handle.length;
+          slide = GripSlide(desc, *model, handle_T);
+        }
+        return control::GraspToolForAction(robot, desc, tool->handle.X_FH, p_R_effector, slide, grasp_options);
       };
       // A handle out of reach (no palm pose, or no complete path: nothing has moved) sends the
       // robot to the next tool down the ranking before it asks for help (unless

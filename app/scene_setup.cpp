@@ -226,6 +226,21 @@ double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length
   return std::max(0.0, (handle_length - desc.grasp.length) / 2 - margin);
 }
 
+control::HandleSlide GripSlide(const robot::RobotDescription& desc, const toollib::ToolModel& tool,
+                               const toollib::Segment& handle, double margin) {
+  const double free = FreeHandleSlide(desc, handle.length, margin);
+  toollib::AxisSpan bar = toollib::HandleBarSpan(tool.mesh, handle);
+  // The effector's extent along the handle axis: its length along it, its radius across.
+  const Eigen::Vector3d a = handle.axis.normalized();
+  const double along = (tool.effector.center - handle.center).dot(a);
+  const double cos = std::abs(tool.effector.axis.normalized().dot(a));
+  const double half = cos * tool.effector.length / 2 + std::sqrt(std::max(0.0, 1 - cos * cos)) * tool.effector.radius;
+  if (along >= 0) bar.max_m = std::min(bar.max_m, along - half);
+  if (along <= 0) bar.min_m = std::max(bar.min_m, along + half);
+  const double inside = desc.grasp.length / 2 + margin;  // from the grasp centre to the bar's end
+  return {std::min(-free, std::min(0.0, bar.min_m + inside)), std::max(free, std::max(0.0, bar.max_m - inside))};
+}
+
 Eigen::Isometry3d ChokedHandleFrame(const robot::RobotDescription& desc, const Eigen::Isometry3d& X_TH,
                                     const Eigen::Vector3d& p_T_effector, double handle_length, double fraction) {
   const Eigen::Vector3d z_H = X_TH.linear().col(2);

@@ -148,8 +148,18 @@ Eigen::Isometry3d PalmGraspFrame(const robot::RobotDescription& desc);
 
 /// How far the hand's grasp cylinder can slide from the centre of a handle of length
 /// `handle_length` [m] either way and stay `margin` [m] inside its ends: (handle_length - grasp
-/// length) / 2 - margin, at least 0 (GraspOptions::handle_slide_m).
+/// length) / 2 - margin, at least 0 (GraspOptions::handle_slide, HandleSlide::Symmetric).
 double FreeHandleSlide(const robot::RobotDescription& desc, double handle_length, double margin = 0.01);
+
+/// Where along a handle's axis the hand may hold a tool: FreeHandleSlide(desc, handle.length,
+/// margin) either way, and further on a side where the tool stays a bar like its handle past the
+/// handle's end (toollib::HandleBarSpan of tool.mesh: a shovel's neck), the hand's grasp cylinder
+/// then `margin` [m] inside the bar and off tool.effector's extent along the axis: a hand on the
+/// effector hides the part that works (a stick held by its far end was pulled with that end in
+/// the hand, and the ball rolled off the table). `handle` is in T (tool.handle, or a perceived
+/// handle mapped into T); the slide is along z of HandleFrame(handle) (handle.axis).
+control::HandleSlide GripSlide(const robot::RobotDescription& desc, const toollib::ToolModel& tool,
+                               const toollib::Segment& handle, double margin = 0.01);
 
 /// Where the robot holds a tool: the handle frame X_TH (in T, z_H along the handle) moved along
 /// z_H toward the handle's end away from the effector (centre p_T_effector) by `fraction` of

@@ -151,7 +151,12 @@ void GraspOptions::Validate() const {
   auto fail = [](const char* field, double value, const char* expected) {
     ThrowInvalid("GraspOptions: ", field, " = ", value, " (expected ", expected, ")");
   };
-  if (!(handle_slide_m >= 0)) fail("handle_slide_m", handle_slide_m, ">= 0");
+  if (!(handle_slide.min_m <= 0) || !std::isfinite(handle_slide.min_m)) {
+    fail("handle_slide.min_m", handle_slide.min_m, "finite, <= 0");
+  }
+  if (!(handle_slide.max_m >= 0) || !std::isfinite(handle_slide.max_m)) {
+    fail("handle_slide.max_m", handle_slide.max_m, "finite, >= 0");
+  }
   if (!(slide_step_m > 0)) fail("slide_step_m", slide_step_m, "> 0");
   if (!(roll_step_rad > 0 && roll_step_rad <= M_PI)) fail("roll_step_rad", roll_step_rad, "in (0, pi]");
   if (!(min_approach_cos >= -1 && min_approach_cos <= 1)) fail("min_approach_cos", min_approach_cos, "in [-1, 1]");
@@ -516,9 +521,14 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   double best_error = std::numeric_limits<double>::infinity();
   const int steps = std::max(1, static_cast<int>(std::round(2 * M_PI / options.roll_step_rad)));
   std::vector<double> slides{0.0};
-  for (double d = options.slide_step_m; d <= options.handle_slide_m + 1e-9; d += options.slide_step_m) {
-    slides.push_back(-d);
-    slides.push_back(d);
+  // Every slide_step_m outward, then each end of the slide where the steps stop short of it (at
+  // the arm's reach, the last millimetres along the handle count).
+  const double widest = std::max(-options.handle_slide.min_m, options.handle_slide.max_m);
+  for (double d = options.slide_step_m; d <= widest + options.slide_step_m - 1e-9; d += options.slide_step_m) {
+    for (const double end : {options.handle_slide.min_m, options.handle_slide.max_m}) {
+      const double along = std::copysign(std::min(d, std::abs(end)), end);
+      if (std::abs(along) > d - options.slide_step_m + 1e-9) slides.push_back(along);
+    }
   }
   const Eigen::Matrix3d R_flip = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   Plan plan;
@@ -955,10 +965,11 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 }
 
 GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
-                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector, double max_slide_m,
-                               const GraspOptions& options) {
-  if (!(max_slide_m >= 0) || !std::isfinite(max_slide_m)) {
-    ThrowInvalid("GraspToolForAction: max_slide_m = ", max_slide_m, " (expected finite, >= 0)");
+                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector,
+                               const HandleSlide& slide, const GraspOptions& options) {
+  if (!(slide.min_m <= 0 && slide.max_m >= 0) || !std::isfinite(slide.min_m) || !std::isfinite(slide.max_m)) {
+    ThrowInvalid("GraspToolForAction: slide = [", slide.min_m, ", ", slide.max_m,
+                 "] (expected finite, min_m <= 0 <= max_m)");
   }
   const Eigen::Isometry3d X_RH_toward = HandleTowardEffector(X_RH, p_R_effector);
   const Eigen::Vector3d z_H = X_RH.linear().col(2);
@@ -969,10 +980,10 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   std::string last_blocked;
   int touching_neighbour = 0;
   std::string last_neighbour_touch;
-  auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
+  auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, const HandleSlide& along) {
     GraspOptions o = options;
     o.axis_direction = direction;
-    o.handle_slide_m = slide;
+    o.handle_slide = along;
     last = GraspHandle(robot, desc, X_RH_grasped, o);
     candidates += last.candidates;
     plan_ms += last.plan_ms;
@@ -1005,8 +1016,8 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   // True when `last` is the answer; false to try the next grasp. A grip that let the tool slip
   // out (or closed on nothing) is tried again, up to max_regrasps times, the other way round.
   bool skip_direction = false;
-  auto done = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, double slide) {
-    if (!attempt(X_RH_grasped, direction, slide)) return false;
+  auto done = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, const HandleSlide& along) {
+    if (!attempt(X_RH_grasped, direction, along)) return false;
     const bool slipped = last.status == GraspStatus::kDropped || last.status == GraspStatus::kEmptyHand;
     if (slipped && regrasps < options.max_regrasps) {
       ++regrasps;
@@ -1030,17 +1041,20 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   // fingertips: the whole handle first, as grasp-gt grasps it.
   constexpr double kLyingSin = 0.34;  // sin 20 deg
   const bool lying = std::abs(z_H.z()) < kLyingSin;
-  if (lying && max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
+  const bool slides = slide.min_m < 0 || slide.max_m > 0;
+  if (lying && slides && done(X_RH, 0, slide)) return finish();
+  // How far the grasp may move toward the handle's end away from the effector.
+  const double away = X_RH_toward.linear().col(2).dot(z_H) > 0 ? -slide.min_m : slide.max_m;
   for (const int direction : {1, 0}) {
     skip_direction = false;
     for (const double choke : {0.6, 0.3, 0.0}) {
       if (skip_direction) break;
       Eigen::Isometry3d X = X_RH_toward;
-      X.translation() -= choke * max_slide_m * X_RH_toward.linear().col(2);
-      if (done(X, direction, 0.0)) return finish();
+      X.translation() -= choke * away * X_RH_toward.linear().col(2);
+      if (done(X, direction, HandleSlide{})) return finish();
     }
   }
-  if (!lying && max_slide_m > 0 && done(X_RH, 0, max_slide_m)) return finish();
+  if (!lying && slides && done(X_RH, 0, slide)) return finish();
   if (blocked > 0) last.reason += Cat(" (", blocked, " grasp transfers blocked on the way and backed off)");
   return finish();
 }

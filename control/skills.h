@@ -28,16 +28,27 @@ struct SagCompensation {
   void Validate() const;  // throws std::invalid_argument naming the field
 };
 
+/// How far a grasp centre may move along a handle's axis z_H from the handle's centre [m]:
+/// min_m <= 0 <= max_m, both finite. Symmetric(s) is [-s, s], e.g. (handle length - grasp length)
+/// / 2 less a margin; a tool that stays a bar past its handle (a stick's other end, a shovel's
+/// neck) reaches further on that side (app's GripSlide).
+struct HandleSlide {
+  double min_m = 0.0;  // toward -z_H, <= 0
+  double max_m = 0.0;  // toward +z_H, >= 0
+  static HandleSlide Symmetric(double s) { return {-s, s}; }
+  bool operator==(const HandleSlide&) const = default;
+};
+
 /// Options of GraspHandle. The defaults grasp library tools standing on the rack of
 /// scenes/default.json (measured by `toolbench bench --protocol grasp-gt`).
 struct GraspOptions {
   /// Rotation step of the palm about the handle axis when sampling palm poses [rad], in (0, pi].
   /// Both directions of the grasp axis along the handle are tried at every step.
   double roll_step_rad = 15.0 * M_PI / 180.0;
-  /// How far the grasp centre may move along the handle axis, either way, from the handle centre
-  /// [m], >= 0 (e.g. (handle length - grasp length) / 2 less a margin); 0 = at the centre only.
-  /// Sampled every slide_step_m, the centre first; the lowest rest cost still decides.
-  double handle_slide_m = 0.0;
+  /// Where along the handle axis the grasp centre may move from the handle centre; {0, 0} = at
+  /// the centre only. Sampled every slide_step_m, the centre first, then both ways outward; the
+  /// lowest rest cost still decides.
+  HandleSlide handle_slide;
   double slide_step_m = 0.02;  // [m], > 0
   /// Minimum cosine between the approach direction (palm normal z_P, from palm to handle) and the
   /// horizontal direction from the robot root's z axis to the handle, in [-1, 1]: rejects palm
@@ -220,7 +231,7 @@ struct GraspResult {
 /// Grasps a handle and lifts it with the right hand (torso + right arm chain to the palm frame):
 ///  1. samples palm poses P that put the hand's grasp cylinder (desc.grasp: centre and axis in P)
 ///     on the handle axis: both axis directions times rotations about the handle every
-///     roll_step_rad, at grasp centres slid along the handle (handle_slide_m, centre first);
+///     roll_step_rad, at grasp centres slid along the handle (handle_slide, centre first);
 ///     drops those whose approach direction fails the filters, screens the rest with a cheap IK
 ///     (CartesianSolver, rest posture desc.HomeQ(), warm start = the current encoders);
 ///  2. for the first slide offset that has any, takes the reachable poses by increasing IK rest
@@ -258,8 +269,9 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 /// Grasps a tool by its handle to use it (PullObject), as pull-gt measured best: with the
 /// effector on the +y_P side of the hand (HandleTowardEffector, axis_direction +1) first, then
 /// either way round; for each, choked toward the handle's end away from the effector by 60 %,
-/// 30 % and 0 % of max_slide_m (the tool then reaches further past the hand). When none of those
-/// plans, the whole handle: GraspHandle sliding up to max_slide_m either way from the centre.
+/// 30 % and 0 % of `slide`'s extent on that side (the tool then reaches further past the hand).
+/// When none of those plans, the whole handle: GraspHandle sliding anywhere in `slide` (along z of
+/// the given X_RH).
 /// A handle lying across the rack (within 20 deg of horizontal: rot3) is grasped the whole-handle
 /// way first: it rests on the ledge against the board, where the choked grasps closed on nothing
 /// or let it roll out of the fingertips (table53 --episodes --seed 1, rot3: 1 of 32 grasped before,
@@ -272,12 +284,13 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 /// the hand open, and so does one that let the tool slip out or closed on nothing (at most
 /// options.max_regrasps times; the rest of that way round is skipped). Returns the first grasp
 /// that planned (its status says whether it held), else the last failure, with `candidates`,
-/// plan_ms and paths_blocked summed over all attempts and slide_m along z of the given X_RH. `max_slide_m` >= 0 (e.g. app's FreeHandleSlide); options.handle_slide_m and
-/// options.axis_direction are overridden. Throws as GraspHandle and HandleTowardEffector do, and
-/// std::invalid_argument for a negative or non-finite max_slide_m.
+/// plan_ms and paths_blocked summed over all attempts and slide_m along z of the given X_RH
+/// (e.g. app's GripSlide); options.handle_slide and options.axis_direction are overridden.
+/// Throws as GraspHandle and HandleTowardEffector do, and std::invalid_argument for a `slide`
+/// that does not hold 0 or is not finite.
 GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
-                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector, double max_slide_m,
-                               const GraspOptions& options = {});
+                               const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector,
+                               const HandleSlide& slide, const GraspOptions& options = {});
 
 /// What a tool action does to an object lying on the table (the thesis's pull, and the drag and
 /// push actions of the tool-affordances experiments).

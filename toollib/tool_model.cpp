@@ -312,6 +312,61 @@ ToolModel LoadToolModel(const std::filesystem::path& sidecar_json) {
   return tool;
 }
 
+AxisSpan HandleBarSpan(const TriangleMesh& mesh, const Segment& handle, double slice_m, double thinnest,
+                       double thicker_m) {
+  if (!(slice_m > 0) || !std::isfinite(slice_m)) ThrowInvalid("HandleBarSpan: slice_m = ", slice_m, " (expected > 0)");
+  if (!(thinnest >= 0 && thinnest <= 1)) ThrowInvalid("HandleBarSpan: thinnest = ", thinnest, " (expected in [0, 1])");
+  if (!(thicker_m >= 0) || !std::isfinite(thicker_m)) {
+    ThrowInvalid("HandleBarSpan: thicker_m = ", thicker_m, " (expected finite, >= 0)");
+  }
+  if (!(handle.axis.norm() > 0) || !handle.axis.allFinite() || !handle.center.allFinite()) {
+    ThrowInvalid("HandleBarSpan: handle axis ", handle.axis.transpose(), " at ", handle.center.transpose(),
+                 " (expected a finite non-zero axis at a finite centre)");
+  }
+  const Eigen::Matrix3Xd& v = mesh.vertices;
+  if (v.cols() == 0) return {};
+  const Eigen::Vector3d c = handle.center;
+  const Eigen::Vector3d a = handle.axis.normalized();
+  const Eigen::VectorXd t = (v.colwise() - c).transpose() * a;  // offset along the axis of each vertex
+  auto radial = [&](const Eigen::Vector3d& p) { return ((p - c) - (p - c).dot(a) * a).norm(); };
+  const double t0 = std::min(t.minCoeff(), 0.0);
+  const auto slices = static_cast<Eigen::Index>(std::floor((std::max(t.maxCoeff(), 0.0) - t0) / slice_m)) + 1;
+  std::vector<double> reach(static_cast<size_t>(slices), -1.0);  // farthest surface point from the axis
+  auto slice_of = [&](double offset) {
+    return std::clamp<Eigen::Index>(static_cast<Eigen::Index>(std::floor((offset - t0) / slice_m)), 0, slices - 1);
+  };
+  auto note = [&](Eigen::Index k, double r) { reach[static_cast<size_t>(k)] = std::max(reach[static_cast<size_t>(k)], r); };
+  for (Eigen::Index i = 0; i < v.cols(); ++i) note(slice_of(t(i)), radial(v.col(i)));
+  const Eigen::Matrix3Xi& f = mesh.faces;
+  for (Eigen::Index j = 0; j < f.cols(); ++j) {
+    for (int e = 0; e < 3; ++e) {
+      const int i1 = f(e, j), i2 = f((e + 1) % 3, j);
+      const double lo = std::min(t(i1), t(i2)), hi = std::max(t(i1), t(i2));
+      // Each face between two slices that the edge crosses: the crossing belongs to both.
+      for (Eigen::Index k = slice_of(lo) + 1; k <= slice_of(hi); ++k) {
+        const double plane = t0 + static_cast<double>(k) * slice_m;
+        if (plane <= lo || plane >= hi) continue;
+        const double s = (plane - t(i1)) / (t(i2) - t(i1));
+        const double r = radial(v.col(i1) + s * (v.col(i2) - v.col(i1)));
+        note(k - 1, r);
+        note(k, r);
+      }
+    }
+  }
+  const double r_min = thinnest * handle.radius, r_max = handle.radius + thicker_m;
+  auto bar = [&](Eigen::Index k) {
+    const double r = reach[static_cast<size_t>(k)];
+    return r >= r_min && r <= r_max;
+  };
+  const Eigen::Index centre = slice_of(0.0);
+  if (!bar(centre)) return {};
+  Eigen::Index first = centre, last = centre;
+  while (first > 0 && bar(first - 1)) --first;
+  while (last + 1 < slices && bar(last + 1)) ++last;
+  return {std::max(t0 + static_cast<double>(first) * slice_m, t.minCoeff()),
+          std::min(t0 + static_cast<double>(last + 1) * slice_m, t.maxCoeff())};
+}
+
 std::vector<ToolModel> LoadToolLibrary(const std::filesystem::path& dir) {
   if (!std::filesystem::is_directory(dir)) {
     ThrowInvalid("LoadToolLibrary: '", dir.string(), "' is not a folder");

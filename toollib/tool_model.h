@@ -67,6 +67,25 @@ struct ToolModel {
   double total_length = 0.0;             // extent of the mesh along z [m]
 };
 
+/// A stretch of a line, as offsets along it from a point on it [m]: min_m <= max_m.
+struct AxisSpan {
+  double min_m = 0.0;
+  double max_m = 0.0;
+};
+
+/// The stretch of a handle's axis line over which a tool's mesh is a bar like its handle, as
+/// offsets from handle.center along handle.axis [m] (both in the mesh's frame): the run of slices
+/// `slice_m` thick (> 0), from the one holding the handle's centre both ways, in which the mesh's
+/// surface reaches out from the axis at most between `thinnest` x handle.radius and
+/// handle.radius + `thicker_m`. Where a hand can close on the tool as on its handle: a stick's
+/// effector end, a shovel's neck (up to its blade), not a hook's thinner shaft or a hammer's head.
+/// Exact for the mesh: in each slice the farthest surface point from the axis is a vertex or an
+/// edge's crossing of a slice's face. {0, 0} when the slice at the centre is not such a bar.
+/// Throws std::invalid_argument for a non-positive slice_m, thinnest outside [0, 1], negative
+/// thicker_m or a zero axis.
+AxisSpan HandleBarSpan(const TriangleMesh& mesh, const Segment& handle, double slice_m = 0.005,
+                       double thinnest = 0.7, double thicker_m = 0.004);
+
 /// Maps a CollisionPart::Type to its sidecar / MuJoCo name ("box", "cylinder", "capsule",
 /// "sphere", "mesh").
 std::string_view CollisionTypeName(CollisionPart::Type type);

@@ -90,7 +90,7 @@ TEST(GraspHandle, RoutesTheTransferOverTheRacksLedge) {
     const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
     const Eigen::Isometry3d X_WT = world.ground_truth().Pose(placed.body);
     control::GraspOptions options;  // as grasp-gt grasps
-    options.handle_slide_m = FreeHandleSlide(scene.robot, model->handle.length);
+    options.handle_slide = GripSlide(scene.robot, *model, model->handle);
     if (with_obstacles) options.obstacles = obstacles;
     options.on_stage = [&](const char* stage) {
       if (std::string_view(stage) != "staged") return;
@@ -232,7 +232,7 @@ TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
   const Eigen::VectorXd before = robot.PositionTargets();
   std::vector<Eigen::Isometry3d> asked;
   control::GraspOptions options;  // as grasp-gt grasps
-  options.handle_slide_m = FreeHandleSlide(scene.robot, model->handle.length);
+  options.handle_slide = GripSlide(scene.robot, *model, model->handle);
   options.obstacles = WorkspaceObstacles(scene.spec);
   options.accept_plan = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
     EXPECT_EQ(q_lifted.size(), scene.robot.HomeQ().size());
@@ -250,7 +250,7 @@ TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
   asked.clear();
   const Eigen::Vector3d p_R_effector = X_RT * model->effector.center;
   const control::GraspResult g = control::GraspToolForAction(robot, scene.robot, X_RH, p_R_effector,
-                                                             FreeHandleSlide(scene.robot, model->handle.length), options);
+                                                             GripSlide(scene.robot, *model, model->handle), options);
   EXPECT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
   ASSERT_EQ(asked.size(), 3u);
   EXPECT_TRUE(asked[2].isApprox(g.X_RP_grasp, 1e-12));
@@ -273,7 +273,7 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
   const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
-  const double free_slide = FreeHandleSlide(scene.robot, model->handle.length);
+  const control::HandleSlide slide = GripSlide(scene.robot, *model, model->handle);
   control::GraspOptions options;
   options.obstacles = WorkspaceObstacles(scene.spec);
   auto grasp = [&](bool for_action) {
@@ -286,9 +286,9 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
     const Eigen::Isometry3d X_RH = X_RT * HandleFrame(model->handle);
     EXPECT_LT(std::abs(X_RH.linear().col(2).z()), 0.1) << "the handle no longer lies: pick another case";
     control::GraspOptions o = options;
-    o.handle_slide_m = free_slide;
+    o.handle_slide = slide;
     const control::GraspResult g =
-        for_action ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, free_slide, options)
+        for_action ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, slide, options)
                    : control::GraspHandle(robot, scene.robot, X_RH, o);
     const double lift = (X_RW * world.ground_truth().Pose(placed.body)).translation().z() - X_RT.translation().z();
     return std::make_pair(g, lift);
@@ -317,9 +317,14 @@ TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
               ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("close_time")));
   EXPECT_THAT(
       [&] {
-        control::GraspToolForAction(robot, scene.robot, Eigen::Isometry3d::Identity(), Eigen::Vector3d::Zero(), -0.1);
+        control::GraspToolForAction(robot, scene.robot, Eigen::Isometry3d::Identity(), Eigen::Vector3d::Zero(),
+                                    control::HandleSlide{0.1, 0.2});
       },
-      ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("max_slide_m")));
+      ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("slide = [0.1, 0.2]")));
+  control::GraspOptions bad_slide;
+  bad_slide.handle_slide.max_m = std::nan("");
+  EXPECT_THAT([&] { control::GraspHandle(robot, scene.robot, Eigen::Isometry3d::Identity(), bad_slide); },
+              ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("handle_slide.max_m")));
   // 2 m in front of the robot: out of reach, and nothing moves.
   X_RH = Eigen::Isometry3d::Identity();
   X_RH.translation() = Eigen::Vector3d(-2.0, 0.2, 0.0);

@@ -283,6 +283,48 @@ TEST_F(GeneratorTest, CommittedAssetsMatchTheGenerator) {
   }
 }
 
+// Where a hand can hold each tool like its handle (HandleBarSpan): the whole stick, a shovel's or
+// spatula's handle and neck up to its blade, a hook's or hammer's handle alone (to the slice).
+TEST_F(GeneratorTest, HandleBarSpanRunsAlongTheBarOfEachTool) {
+  constexpr double kSlice = 0.005;
+  int sticks = 0, necks = 0;
+  for (const ToolModel& tool : tools()) {
+    SCOPED_TRACE(tool.name);
+    const AxisSpan span = HandleBarSpan(tool.mesh, tool.handle, kSlice);
+    const double half = tool.handle.length / 2;
+    const double butt = -tool.handle.center.dot(tool.handle.axis);  // the tool's end at z_T = 0
+    EXPECT_NEAR(span.min_m, std::max(-half, butt), 1e-9);             // library handles end at the butt
+    // An L-stick's foot slants back over its handle's declared end (lstick_4: from 3.5 cm inside).
+    if (tool.family != "lstick") EXPECT_GE(span.max_m, half - kSlice);
+    const double effector_start =
+        (tool.effector.center - tool.handle.center).dot(tool.handle.axis) - tool.effector.length / 2;
+    if (tool.family == "stick") {
+      ++sticks;
+      EXPECT_NEAR(span.max_m, tool.total_length + butt, 1e-9);  // to the other end
+    } else if (tool.family == "shovel") {
+      ++necks;
+      EXPECT_GT(span.max_m, half + 0.005);                 // the neck
+      EXPECT_LE(span.max_m, effector_start + kSlice);      // not the blade
+    } else if (tool.family == "hook" || tool.family == "hammer") {
+      EXPECT_LE(span.max_m, half + 0.006);                 // not the thin shaft, not the head
+    }
+  }
+  EXPECT_EQ(sticks, 4);
+  EXPECT_EQ(necks, 4);
+
+  // A handle declared much thicker than the tool: no slice there is a bar like it.
+  ToolModel thin = tools().front();
+  thin.handle.radius = 0.1;
+  const AxisSpan none = HandleBarSpan(thin.mesh, thin.handle);
+  EXPECT_EQ(none.min_m, 0.0);
+  EXPECT_EQ(none.max_m, 0.0);
+  EXPECT_THAT([&] { HandleBarSpan(thin.mesh, thin.handle, 0.0); },
+              ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("slice_m")));
+  thin.handle.axis.setZero();
+  EXPECT_THAT([&] { HandleBarSpan(thin.mesh, thin.handle); },
+              ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("handle axis")));
+}
+
 TEST_F(GeneratorTest, SaveLoadRoundTripIsExact) {
   const auto dir = FreshTempDir();
   for (const ToolModel& tool : tools()) {
