@@ -295,7 +295,9 @@ TEST_F(GeneratorTest, HandleBarSpanRunsAlongTheBarOfEachTool) {
     const double butt = -tool.handle.center.dot(tool.handle.axis);  // the tool's end at z_T = 0
     EXPECT_NEAR(span.min_m, std::max(-half, butt), 1e-9);             // library handles end at the butt
     // An L-stick's foot slants back over its handle's declared end (lstick_4: from 3.5 cm inside).
-    if (tool.family != "lstick") EXPECT_GE(span.max_m, half - kSlice);
+    if (tool.family != "lstick") {
+      EXPECT_GE(span.max_m, half - kSlice);
+    }
     const double effector_start =
         (tool.effector.center - tool.handle.center).dot(tool.handle.axis) - tool.effector.length / 2;
     if (tool.family == "stick") {
