@@ -613,7 +613,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     run_stage("grasp_tool", [&](StageRecord& s) {
       // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
       // on the side of the hand from which the wrist can point it forward and down; the whole
-      // perceived handle (1 cm from its ends) when none of those is reachable. The effector is
+      // perceived handle (1 cm from its ends, or the bar past it) when none of those is reachable. The effector is
       // where the recognised model puts it in the perceived tool pose.
       control::GraspOptions grasp_options;
       grasp_options.obstacles = WorkspaceObstacles(spec);
@@ -621,7 +621,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       auto grasp = [&]() {
         const Eigen::Vector3d p_R_effector = tool->X_RT * model->effector.center;
         // Along the perceived handle, and past its end where the recognised model stays a bar
-        // like it (GripSlide); a tool not recognised is not its closest model: the handle only.
+        // like it up to its effector (GripSlide, the model's handle radius); a tool not
+        // recognised is not its closest model: the handle only.
         control::HandleSlide slide = control::HandleSlide::Symmetric(FreeHandleSlide(desc, tool->handle.length));
         if (tool->known) {
           const Eigen::Isometry3d X_TR = tool->X_RT.inverse();

@@ -30,8 +30,8 @@ struct SagCompensation {
 
 /// How far a grasp centre may move along a handle's axis z_H from the handle's centre [m]:
 /// min_m <= 0 <= max_m, both finite. Symmetric(s) is [-s, s], e.g. (handle length - grasp length)
-/// / 2 less a margin; a tool that stays a bar past its handle (a stick's other end, a shovel's
-/// neck) reaches further on that side (app's GripSlide).
+/// / 2 less a margin; a tool that stays a bar past its handle (a shovel's neck) reaches further on
+/// that side (app's GripSlide).
 struct HandleSlide {
   double min_m = 0.0;  // toward -z_H, <= 0
   double max_m = 0.0;  // toward +z_H, >= 0
