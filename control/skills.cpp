@@ -147,16 +147,19 @@ void SagCompensation::Validate() const {
   if (!(max_offset_rad >= 0)) ThrowInvalid("SagCompensation: max_offset_rad = ", max_offset_rad, ", expected >= 0");
 }
 
+void HandleSlide::Validate(const std::string& field) const {
+  auto fail = [&](const char* end, double value, const char* expected) {
+    ThrowInvalid(field, " = [", min_m, ", ", max_m, "]: ", field, end, " = ", value, " (expected ", expected, ")");
+  };
+  if (!(min_m <= 0) || !std::isfinite(min_m)) fail(".min_m", min_m, "finite, <= 0");
+  if (!(max_m >= 0) || !std::isfinite(max_m)) fail(".max_m", max_m, "finite, >= 0");
+}
+
 void GraspOptions::Validate() const {
   auto fail = [](const char* field, double value, const char* expected) {
     ThrowInvalid("GraspOptions: ", field, " = ", value, " (expected ", expected, ")");
   };
-  if (!(handle_slide.min_m <= 0) || !std::isfinite(handle_slide.min_m)) {
-    fail("handle_slide.min_m", handle_slide.min_m, "finite, <= 0");
-  }
-  if (!(handle_slide.max_m >= 0) || !std::isfinite(handle_slide.max_m)) {
-    fail("handle_slide.max_m", handle_slide.max_m, "finite, >= 0");
-  }
+  handle_slide.Validate("GraspOptions: handle_slide");
   if (!(slide_step_m > 0)) fail("slide_step_m", slide_step_m, "> 0");
   if (!(roll_step_rad > 0 && roll_step_rad <= M_PI)) fail("roll_step_rad", roll_step_rad, "in (0, pi]");
   if (!(min_approach_cos >= -1 && min_approach_cos <= 1)) fail("min_approach_cos", min_approach_cos, "in [-1, 1]");
@@ -967,10 +970,7 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
                                const Eigen::Isometry3d& X_RH, const Eigen::Vector3d& p_R_effector,
                                const HandleSlide& slide, const GraspOptions& options) {
-  if (!(slide.min_m <= 0 && slide.max_m >= 0) || !std::isfinite(slide.min_m) || !std::isfinite(slide.max_m)) {
-    ThrowInvalid("GraspToolForAction: slide = [", slide.min_m, ", ", slide.max_m,
-                 "] (expected finite, min_m <= 0 <= max_m)");
-  }
+  slide.Validate("GraspToolForAction: slide");
   const Eigen::Isometry3d X_RH_toward = HandleTowardEffector(X_RH, p_R_effector);
   const Eigen::Vector3d z_H = X_RH.linear().col(2);
   GraspResult last;

@@ -37,6 +37,8 @@ struct HandleSlide {
   double max_m = 0.0;  // toward +z_H, >= 0
   static HandleSlide Symmetric(double s) { return {-s, s}; }
   bool operator==(const HandleSlide&) const = default;
+  /// Throws std::invalid_argument "<field> = [min, max]: <field>.min_m = ..." naming the bad end.
+  void Validate(const std::string& field) const;
 };
 
 /// Options of GraspHandle. The defaults grasp library tools standing on the rack of
