@@ -848,16 +848,20 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // inspection's), above the start, where the drag starts and where it ends. The transfer
       // swings the tool to its working orientation and it turns in the grip meanwhile (random
       // seed 1: median 8.9 deg above the start, 9.1 deg where the drag starts; 6.4 deg there with
-      // the noslip pass at every step).
-      nlohmann::json grip_turn;
+      // the noslip pass at every step). And where the ball is after each step of the action, to
+      // tell which step lost it (random seeds 1-4: of the balls a pull lost off the table, 4 went
+      // in the drag and 10 rolled on over the edge after it had stopped).
+      nlohmann::json scoring;
       pull_options.on_stage = [&](const char* stage) {
         const std::string name = stage;
         if (name == "above_start" || name == "at_start" || name == "dragged") {
           const InHandError e = InHandPoseError(X_PT, X_PT_truth_at(PalmPoseFromEncoders(desc, robot)),
                                                 model->effector.center);
-          grip_turn[name + "_error_deg_truth"] = e.rotation_deg;
-          grip_turn[name + "_effector_error_m_truth"] = e.effector_m;
+          scoring[name + "_error_deg_truth"] = e.rotation_deg;
+          scoring[name + "_effector_error_m_truth"] = e.effector_m;
         }
+        scoring["ball_" + name + "_R_truth"] =
+            Vec3(X_RW * world.ground_truth().Pose(scene.composed.ball_body).translation());
         stage_frame("action_" + name);
       };
       control::PullResult p = control::PullObject(robot, desc, X_PT, effector, p_RB, ball_radius, pull_options);
@@ -883,7 +887,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.details["pull_elevation_deg"] = p.elevation_rad * 180 / M_PI;
       s.details["pull_yaw_deg"] = p.yaw_rad * 180 / M_PI;
       s.details["pull_roll_deg"] = p.roll_rad * 180 / M_PI;
-      for (const auto& [key, value] : grip_turn.items()) s.details[key] = value;
+      for (const auto& [key, value] : scoring.items()) s.details[key] = value;
       // Where the ball should be now: half the planned drag along the pull from where it was.
       if (s.ok) ball_expected_R = p_RB + 0.5 * p.planned_drag_m * p.pull_dir_R;
       return p.status;

@@ -169,11 +169,14 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
   constexpr double kRadius = 0.035;
   const Eigen::Vector3d dir = ActionDirection(ToolAction::kPull, p_RO);
-  // The table's near edge 3 cm beyond the ball's inset (radius + margin) along x: the ball may
-  // travel 0.03 / dir.x() along the pull direction, which a drag of twice that makes.
+  // The table's near edge `beyond` past the ball's inset (radius + margin) along x: the ball may
+  // travel beyond / dir.x() along the pull direction, which a drag of 1 / support_travel_fraction
+  // times that makes: 6 cm of drag.
   const double inset = kRadius + options.support_edge_margin_m;
-  options.support_xy = Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + 0.03, 1.0));
-  const double room = 0.03 / dir.x() / options.support_travel_fraction;
+  const double beyond = 0.06 * options.support_travel_fraction;
+  options.support_xy =
+      Eigen::AlignedBox2d(Eigen::Vector2d(-1.0, -1.0), Eigen::Vector2d(p_RO.x() + inset + beyond, 1.0));
+  const double room = beyond / dir.x() / options.support_travel_fraction;
   const PullPlan plan = PlanPull(desc, desc.HomeQ(), X_PT, effector, p_RO, kRadius, options);
   ASSERT_TRUE(plan.complete()) << plan.result.reason;
   EXPECT_LE(plan.result.planned_drag_m, room + 1e-9);
