@@ -613,8 +613,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     run_stage("grasp_tool", [&](StageRecord& s) {
       // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
       // on the side of the hand from which the wrist can point it forward and down; the whole
-      // perceived handle (1 cm from its ends, or the bar past it) when none of those is reachable. The effector is
-      // where the recognised model puts it in the perceived tool pose.
+      // perceived handle (1 cm from its ends, or the bar past it) when none of those is
+      // reachable. The effector is where the recognised model puts it in the perceived tool pose.
       control::GraspOptions grasp_options;
       grasp_options.obstacles = WorkspaceObstacles(spec);
       grasp_options.on_stage = [&](const char* stage) { stage_frame(std::string("grasp_") + stage); };

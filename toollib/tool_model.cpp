@@ -335,7 +335,9 @@ AxisSpan HandleBarSpan(const TriangleMesh& mesh, const Segment& handle, double s
   auto slice_of = [&](double offset) {
     return std::clamp<Eigen::Index>(static_cast<Eigen::Index>(std::floor((offset - t0) / slice_m)), 0, slices - 1);
   };
-  auto note = [&](Eigen::Index k, double r) { reach[static_cast<size_t>(k)] = std::max(reach[static_cast<size_t>(k)], r); };
+  auto note = [&](Eigen::Index k, double r) {
+    reach[static_cast<size_t>(k)] = std::max(reach[static_cast<size_t>(k)], r);
+  };
   for (Eigen::Index i = 0; i < v.cols(); ++i) note(slice_of(t(i)), radial(v.col(i)));
   const Eigen::Matrix3Xi& f = mesh.faces;
   for (Eigen::Index j = 0; j < f.cols(); ++j) {

@@ -83,8 +83,8 @@ struct AxisSpan {
 /// edge's crossing of a slice's face. {0, 0} when the slice at the centre is not such a bar.
 /// Throws std::invalid_argument for a non-positive slice_m, thinnest outside [0, 1], negative
 /// thicker_m or a zero axis.
-AxisSpan HandleBarSpan(const TriangleMesh& mesh, const Segment& handle, double slice_m = 0.005,
-                       double thinnest = 0.7, double thicker_m = 0.004);
+AxisSpan HandleBarSpan(const TriangleMesh& mesh, const Segment& handle, double slice_m = 0.005, double thinnest = 0.7,
+                       double thicker_m = 0.004);
 
 /// Maps a CollisionPart::Type to its sidecar / MuJoCo name ("box", "cylinder", "capsule",
 /// "sphere", "mesh").

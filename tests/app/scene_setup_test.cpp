@@ -81,7 +81,8 @@ TEST(GripSlide, ReachesPastTheHandleWhereTheToolStaysABarUpToItsEffector) {
   // A handle thicker than any bar on the mesh keeps its free slide.
   toollib::ToolModel odd = assets.library.front();
   odd.handle.radius = 0.2;
-  EXPECT_EQ(GripSlide(desc, odd, odd.handle), control::HandleSlide::Symmetric(FreeHandleSlide(desc, odd.handle.length)));
+  EXPECT_EQ(GripSlide(desc, odd, odd.handle),
+            control::HandleSlide::Symmetric(FreeHandleSlide(desc, odd.handle.length)));
 }
 
 }  // namespace

@@ -288,8 +288,9 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
     control::GraspOptions o = options;
     o.handle_slide = slide;
     const control::GraspResult g =
-        for_action ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, slide, options)
-                   : control::GraspHandle(robot, scene.robot, X_RH, o);
+        for_action
+            ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, slide, options)
+            : control::GraspHandle(robot, scene.robot, X_RH, o);
     const double lift = (X_RW * world.ground_truth().Pose(placed.body)).translation().z() - X_RT.translation().z();
     return std::make_pair(g, lift);
   };

@@ -293,7 +293,7 @@ TEST_F(GeneratorTest, HandleBarSpanRunsAlongTheBarOfEachTool) {
     const AxisSpan span = HandleBarSpan(tool.mesh, tool.handle, kSlice);
     const double half = tool.handle.length / 2;
     const double butt = -tool.handle.center.dot(tool.handle.axis);  // the tool's end at z_T = 0
-    EXPECT_NEAR(span.min_m, std::max(-half, butt), 1e-9);             // library handles end at the butt
+    EXPECT_NEAR(span.min_m, std::max(-half, butt), 1e-9);           // library handles end at the butt
     // An L-stick's foot slants back over its handle's declared end (lstick_4: from 3.5 cm inside).
     if (tool.family != "lstick") {
       EXPECT_GE(span.max_m, half - kSlice);
@@ -305,10 +305,10 @@ TEST_F(GeneratorTest, HandleBarSpanRunsAlongTheBarOfEachTool) {
       EXPECT_NEAR(span.max_m, tool.total_length + butt, 1e-9);  // to the other end
     } else if (tool.family == "shovel") {
       ++necks;
-      EXPECT_GT(span.max_m, half + 0.005);                 // the neck
-      EXPECT_LE(span.max_m, effector_start + kSlice);      // not the blade
+      EXPECT_GT(span.max_m, half + 0.005);             // the neck
+      EXPECT_LE(span.max_m, effector_start + kSlice);  // not the blade
     } else if (tool.family == "hook" || tool.family == "hammer") {
-      EXPECT_LE(span.max_m, half + 0.006);                 // not the thin shaft, not the head
+      EXPECT_LE(span.max_m, half + 0.006);  // not the thin shaft, not the head
     }
   }
   EXPECT_EQ(sticks, 4);
