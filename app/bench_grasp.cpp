@@ -267,6 +267,7 @@ int RunGraspBench(const BenchRequest& request) {
                           {"candidates_feasible", r.grasp.candidates_feasible},
                           {"paths_blocked", r.grasp.paths_blocked},
                           {"transfer_raised", r.grasp.transfer_raised},
+                          {"transfer_route", r.grasp.transfer_route},
                           {"candidates_touching", r.grasp.candidates_touching},
                           {"last_touching", r.grasp.last_touching},
                           {"hand_touches_fixture", r.grasp.hand_touches_fixture},

@@ -746,6 +746,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
                    {"paths_blocked", g.paths_blocked},
                    {"last_blocked", g.last_blocked},
                    {"transfer_raised", g.transfer_raised},
+                   {"transfer_route", g.transfer_route},
                    {"candidates_touching", g.candidates_touching},
                    {"hand_touches_fixture", g.hand_touches_fixture},
                    {"hand_touch_depth_m", g.hand_touch_depth_m},

@@ -81,6 +81,7 @@ struct Plan {
   Eigen::VectorXd q_grasp;
   Eigen::VectorXd q_pregrasp;             // end of the joint-space transfer: staging pose, else pre-grasp
   std::vector<Eigen::VectorXd> transfer_via;  // joint-space via postures before q_pregrasp
+  const char* transfer_route = "direct";      // how: ClearTransfer's route names
   std::vector<Eigen::VectorXd> approach;  // staging (exclusive) -> pre-grasp -> grasp (inclusive)
   std::vector<Eigen::VectorXd> lift;
 };
@@ -262,10 +263,12 @@ IkOptions LimitedIk(const IkOptions& base, int restarts, int ipopt_iterations) {
 /// obstacles. A blocked transfer is tried again through via postures, for each of
 /// options.transfer_raise_m in turn: the transfer's end raised (then down onto it), the current
 /// palm raised (then across), and both; then joint by joint: the arm bent up first, or the torso
-/// turned last. The first clear one sets plan->transfer_via. False when the transfer stays
-/// blocked (counted and described in *result).
+/// turned last; then through the home posture q_home (the arm's joints and the torso's), alone or
+/// followed by the transfer's end raised. The first clear one sets plan->transfer_via and
+/// plan->transfer_route. False when the transfer stays blocked (counted and described in *result).
 bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const KinematicChain& chain,
-                   const Eigen::VectorXd& q_now, const GraspOptions& options, Plan* plan, GraspResult* result) {
+                   const Eigen::VectorXd& q_now, const Eigen::VectorXd& q_home, const GraspOptions& options,
+                   Plan* plan, GraspResult* result) {
   const double step = options.transfer_check_step_rad;
   auto first_hit = [&](const std::vector<Eigen::VectorXd>& via) {
     Eigen::VectorXd from = q_now;
@@ -277,6 +280,16 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   };
   const std::optional<ClearanceHit> hit = first_hit({});
   if (!hit) return true;
+  auto take_first_clear = [&](const std::vector<std::vector<Eigen::VectorXd>>& routes, const char* name) {
+    for (const auto& via : routes) {
+      if (!first_hit(via)) {
+        plan->transfer_via = via;
+        plan->transfer_route = name;
+        return true;
+      }
+    }
+    return false;
+  };
   // A palm pose moved from the one at posture q (warm start) by `shift` in R.
   auto shifted = [&](const Eigen::VectorXd& q, const Eigen::Vector3d& shift) -> std::optional<Eigen::VectorXd> {
     Eigen::Isometry3d X = chain.TipPose(q);
@@ -288,6 +301,7 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   Eigen::Vector3d inward = -chain.TipPose(plan->q_pregrasp).translation();  // toward the robot's z axis
   inward.z() = 0;
   inward = inward.norm() > 1e-6 ? inward.normalized() : Eigen::Vector3d::Zero();
+  std::vector<Eigen::VectorXd> raised_ends;  // the transfer's end raised, kept for the routes through home
   for (const double raise : options.transfer_raise_m) {
     const Eigen::Vector3d up = raise * Eigen::Vector3d::UnitZ();
     std::vector<std::vector<Eigen::VectorXd>> routes;
@@ -296,16 +310,14 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
     const auto above_end = shifted(plan->q_pregrasp, up);
     const auto inside_end = shifted(plan->q_pregrasp, up + options.transfer_inward_m * inward);
     const auto above_now = shifted(q_now, up);
+    for (const auto& end : {above_end, inside_end}) {
+      if (end) raised_ends.push_back(*end);
+    }
     if (above_end) routes.push_back({*above_end});
     if (inside_end) routes.push_back({*inside_end});
     if (above_now) routes.push_back({*above_now});
     if (above_now && inside_end) routes.push_back({*above_now, *inside_end});
-    for (const auto& via : routes) {
-      if (!first_hit(via)) {
-        plan->transfer_via = via;
-        return true;
-      }
-    }
+    if (take_first_clear(routes, "raised")) return true;
   }
   // Joint by joint: after the look at the rack the hand hangs beside the torso, below the top of
   // the rack's ledge, and every route above could sweep the fingers through the ledge's near end
@@ -324,14 +336,22 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
     return q;
   };
   const Eigen::VectorXd& q_end = plan->q_pregrasp;
-  for (const Eigen::VectorXd& via :
-       {with(q_now, q_end, {"r_shoulder_pitch", "r_elbow", "r_wrist_prosup", "r_wrist_pitch", "r_wrist_yaw"}),
-        with(q_end, q_now, {"torso_pitch", "torso_roll", "torso_yaw"})}) {
-    if (!first_hit({via})) {
-      plan->transfer_via = {via};
-      return true;
-    }
+  if (take_first_clear(
+          {{with(q_now, q_end, {"r_shoulder_pitch", "r_elbow", "r_wrist_prosup", "r_wrist_pitch", "r_wrist_yaw"})}},
+          "arm_first") ||
+      take_first_clear({{with(q_end, q_now, {"torso_pitch", "torso_roll", "torso_yaw"})}}, "torso_last")) {
+    return true;
   }
+  // Through the home posture, the hand in front of the chest: from the look at the rack, every
+  // route above to the clear poses at a lying handle's centre (rot3) could be blocked, and the
+  // grasp slid off the tool's balance or took a pose that pressed the open hand 20-25 mm into the
+  // board, where the palm stopped 9-11 cm short of the handle (grasp-gt --from-rack-look, rot3: 13
+  // of 32 grasped before this route, 22 with it; random-50 seeds 1-4: 176 -> 179 own grasps).
+  Eigen::VectorXd home = q_now;
+  for (const int index : chain.q_indices()) home[index] = q_home[index];
+  std::vector<std::vector<Eigen::VectorXd>> routes{{home}};
+  for (const Eigen::VectorXd& end : raised_ends) routes.push_back({home, end});
+  if (take_first_clear(routes, "home")) return true;
   ++result->paths_blocked;
   result->last_blocked = Cat("the transfer would bring ", hit->link, " within ", options.obstacle_margin_m, " m of ",
                              hit->obstacle, " (at ", hit->p_R.transpose(), " m in R)");
@@ -505,7 +525,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
       }
       if (back.size() == 2) p.lift.insert(p.lift.end(), back.begin(), back.end());
     }
-    if (ok && !clearance.empty() && !ClearTransfer(clearance, solver, chain, q_now, options, &p, &result)) {
+    if (ok && !clearance.empty() && !ClearTransfer(clearance, solver, chain, q_now, desc.HomeQ(), options, &p, &result)) {
       last_failure = result.last_blocked;
       ok = false;
     }
@@ -685,6 +705,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
     MoveJoints(robot, OpenHandGoal(chain, via, desc), options.transfer);
   }
   result.transfer_raised = !plan.transfer_via.empty();
+  result.transfer_route = plan.transfer_route;
   const MotionResult transfer = MoveJoints(robot, OpenHandGoal(chain, plan.q_pregrasp, desc), options.transfer);
   result.transfer_s = robot.Time() - t0;
   if (options.on_stage) options.on_stage("staged");

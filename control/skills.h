@@ -215,6 +215,10 @@ struct GraspResult {
   int paths_blocked = 0;        // complete paths rejected: the transfer would hit an obstacle
   std::string last_blocked;     // the last of those: which link, which obstacle, where
   bool transfer_raised = false; // the chosen transfer goes through via postures (palm raised, or joint by joint)
+  /// How the chosen transfer avoids the fixtures: "direct" (no via posture), "raised" (the palm
+  /// raised at either end), "arm_first" (the arm bent up, then the torso), "torso_last", "home"
+  /// (through the home posture).
+  std::string transfer_route = "direct";
   int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
   std::string last_touching;    // the last of those: which link, which obstacle
   bool hand_touches_fixture = false;  // the chosen pose is one of those (no other had a path)

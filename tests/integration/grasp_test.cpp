@@ -142,6 +142,32 @@ TEST(GraspHandle, BendsTheArmUpFirstWhenTheHandHangsBelowTheLedge) {
   ExpectGraspedLiftedAndHeld(r);
 }
 
+// stick_1 lying across the rack (rot3), grasped as the episode grasps it, after the look at the
+// rack. Every raised and joint-by-joint transfer to the palm poses at the handle's centre swept the
+// hand through the rack's ledge, so the grasp slid 4 cm along the handle, off the stick's balance,
+// and the stick slipped out in the lift (grasp-gt --from-rack-look, rot3: 13 of 32 grasped; others
+// took poses that pressed the open hand 20-25 mm into the board, and the palm stopped 9-11 cm short
+// of the handle). The transfer goes through the home posture instead, keeps clear of the rack, and
+// the stick is grasped at its handle's centre, lifted and held.
+TEST(GraspHandle, ReachesAToolLyingAcrossTheRackThroughTheHomePosture) {
+  SceneRequest request;
+  request.tools = {"stick_1"};
+  request.cells = {"rot3"};
+  const LoadedScene scene = LoadScene(request);
+  GraspCaseOptions after_look;
+  after_look.from_rack_look = true;
+  const GraspCaseResult r = RunGraspCase(scene, "stick_1", "rot3", request.seed, after_look);
+  EXPECT_EQ(r.grasp.transfer_route, "home") << r.grasp.paths_blocked << " paths blocked, the last: "
+                                             << r.grasp.last_blocked;
+  EXPECT_NEAR(r.grasp.slide_m, 0.0, 1e-9);
+  EXPECT_LT(r.grasp.hand_touch_depth_m, 0.02);
+  for (const auto& h : r.handle_in_hand) {
+    if (h.stage != "staged") continue;
+    for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
+  }
+  ExpectGraspedLiftedAndHeld(r);
+}
+
 // stick_2 at the rack's end beside the robot (pos1): the reachable palm pose of lowest rest cost
 // puts the open hand's fingertips against the rack's board, which stops the palm 7 mm short of the
 // handle and tilted, and the closing fingers flick the stick off the rack (9 of the 10 failures at
