@@ -195,6 +195,7 @@ PullCaseResult RunPullCase(const LoadedScene& scene, const std::string& tool, st
   out.ball_start_R = ball_R();
   control::PullOptions pull_options = options.pull;
   pull_options.support_xy = TableTopArea(scene.spec);
+  pull_options.fixtures = RackObstacles(scene.spec);
   // Where the tool really is at the start of the drag (ground truth), against where the plan put
   // it, and the palm from the encoders against the tool: sag of the arm vs slip in the hand.
   int stage_index = 0;

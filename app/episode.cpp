@@ -481,6 +481,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     control::PullOptions pull_options;
     pull_options.action = *action;
     pull_options.support_xy = TableTopArea(spec);
+    pull_options.fixtures = RackObstacles(spec);
     // In-hand rolls the model was explored with: the grasp (and so the roll) is not planned yet,
     // so a tool's expected effect is its mean over them.
     std::vector<double> rolls_deg{0.0, 90.0, 180.0, 270.0};

@@ -129,6 +129,14 @@ std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec)
   return out;
 }
 
+std::vector<control::ObstacleBox> RackObstacles(const sim::SceneSpec& spec) {
+  std::vector<control::ObstacleBox> out = WorkspaceObstacles(spec);
+  out.erase(std::remove_if(out.begin(), out.end(),
+                           [](const control::ObstacleBox& box) { return box.name.rfind("rack_", 0) != 0; }),
+            out.end());
+  return out;
+}
+
 Eigen::AlignedBox2d TableTopArea(const sim::SceneSpec& spec) {
   return {spec.table.center - spec.table.size / 2, spec.table.center + spec.table.size / 2};
 }

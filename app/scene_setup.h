@@ -89,6 +89,10 @@ InHandError InHandPoseError(const Eigen::Isometry3d& X_PT, const Eigen::Isometry
 /// obstacles for the arm's planning: known from the scene file, like the table height.
 std::vector<control::ObstacleBox> WorkspaceObstacles(const sim::SceneSpec& spec);
 
+/// The rack's boxes of WorkspaceObstacles (named "rack_..."): what a tool carried off the rack must
+/// keep clear of (PullOptions::fixtures; the table is the pull's support, checked on its own).
+std::vector<control::ObstacleBox> RackObstacles(const sim::SceneSpec& spec);
+
 /// The table top in the horizontal plane of R (PullOptions::support_xy, and shrunk for
 /// PutDownOptions::support_xy): known from the
 /// scene file, like the table height.

@@ -66,12 +66,15 @@ ArmClearance::ArmClearance(const robot::RobotDescription& desc, std::vector<Obst
   }
 }
 
-double ArmClearance::Distance(const Sphere& sphere, const Eigen::Vector3d& p_R, const ObstacleBox& box) {
+double BoxDistance(const ObstacleBox& box, const Eigen::Vector3d& p_R) {
   const Eigen::Vector3d p_B = box.X_RB.linear().transpose() * (p_R - box.X_RB.translation());
   const Eigen::Vector3d d = p_B.cwiseAbs() - box.half;
   const double outside = d.cwiseMax(0.0).norm();
-  const double surface = outside > 0 ? outside : d.maxCoeff();  // negative inside
-  return surface - sphere.radius;
+  return outside > 0 ? outside : d.maxCoeff();
+}
+
+double ArmClearance::Distance(const Sphere& sphere, const Eigen::Vector3d& p_R, const ObstacleBox& box) {
+  return BoxDistance(box, p_R) - sphere.radius;
 }
 
 std::vector<Eigen::Isometry3d> ArmClearance::LinkPoses(const Eigen::VectorXd& q_model) const {

@@ -19,6 +19,9 @@ struct ObstacleBox {
   Eigen::Vector3d half = Eigen::Vector3d::Zero();          // half extents [m], > 0
 };
 
+/// Distance of the point p_R (in R) from the box's surface [m]: negative inside it.
+double BoxDistance(const ObstacleBox& box, const Eigen::Vector3d& p_R);
+
 /// Where a posture comes too close to an obstacle.
 struct ClearanceHit {
   std::string link;      // robot link, e.g. "r_little_distal_phalanx"

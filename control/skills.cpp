@@ -16,6 +16,10 @@
 namespace toolbench::control {
 namespace {
 
+// How much nearer than where the pull's transfer starts a tool may come to a fixture it is already
+// within PullOptions::fixture_clearance_m of [m] (the hand holds still, the tool sags a little).
+constexpr double kFixtureSlackM = 0.002;
+
 // Model q (URDF order) from values named by the robot interface; joints it does not cover keep
 // their home value.
 Eigen::VectorXd ModelQFrom(const robot::RobotDescription& desc, const std::vector<std::string>& names,
@@ -945,6 +949,13 @@ void PullOptions::Validate() const {
   if (transfer_waypoints < 2) fail("transfer_waypoints", transfer_waypoints, ">= 2");
   if (!(object_clearance_m >= 0)) fail("object_clearance_m", object_clearance_m, ">= 0");
   if (!(left_arm_object_radius_m >= 0)) fail("left_arm_object_radius_m", left_arm_object_radius_m, ">= 0");
+  if (!(fixture_clearance_m >= 0)) fail("fixture_clearance_m", fixture_clearance_m, ">= 0");
+  for (const ObstacleBox& box : fixtures) {
+    if (!(box.X_RB.matrix().allFinite() && box.half.allFinite() && (box.half.array() > 0).all())) {
+      ThrowInvalid("PullOptions: fixtures box '", box.name, "' has half extents (", box.half.transpose(),
+                   ") or a pose that is not finite and positive");
+    }
+  }
   if (!(max_joint_step_rad > 0)) fail("max_joint_step_rad", max_joint_step_rad, "> 0");
   if (!(max_pull_turn_rad >= 0 && max_pull_turn_rad <= M_PI / 2)) fail("max_pull_turn_rad", max_pull_turn_rad, "in [0, pi/2]");
   if (!(pull_turn_step_rad > 0)) fail("pull_turn_step_rad", pull_turn_step_rad, "> 0");
@@ -1197,6 +1208,18 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     }
   }
   std::string transfer_failure;
+  // Per fixture box, how near the tool may come on the transfer's turn and descent [m]: set where
+  // the turn starts (plan_transfer).
+  std::vector<double> fixture_floor(options.fixtures.size(), options.fixture_clearance_m);
+  auto tool_fixture_distances = [&](const Eigen::Matrix3Xd& tool) {
+    std::vector<double> nearest(options.fixtures.size(), std::numeric_limits<double>::infinity());
+    for (size_t b = 0; b < options.fixtures.size(); ++b) {
+      for (Eigen::Index i = 0; i < tool.cols(); ++i) {
+        nearest[b] = std::min(nearest[b], BoxDistance(options.fixtures[b], tool.col(i)));
+      }
+    }
+    return nearest;
+  };
   auto transfer_clear = [&](const Eigen::VectorXd& q) {
     for (size_t i = 0; i < left_arm.size(); ++i) {
       const Eigen::Vector3d p = left_arm[i].TipPose(q).translation();
@@ -1216,6 +1239,13 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
       }
       if ((tool.col(i) - p_RO).squaredNorm() < r_min * r_min) {
         transfer_failure = "the tool would hit the object";
+        return false;
+      }
+    }
+    const std::vector<double> nearest = tool_fixture_distances(tool);
+    for (size_t b = 0; b < nearest.size(); ++b) {
+      if (nearest[b] < fixture_floor[b]) {
+        transfer_failure = Cat("the tool would come within ", nearest[b], " m of ", options.fixtures[b].name);
         return false;
       }
     }
@@ -1245,6 +1275,13 @@ PullPlan PlanPull(const robot::RobotDescription& desc, const Eigen::VectorXd& q_
     const std::vector<Eigen::VectorXd> clear =
         LineWaypoints(path_solver, X_now, X_clear, 4, q_now, options.max_joint_step_rad);
     const Eigen::VectorXd q_clear = clear.empty() ? q_now : clear.back();
+    if (geometric && !options.fixtures.empty()) {
+      // A fixture the tool is already near (just off the rack) may not be approached further.
+      const std::vector<double> start = tool_fixture_distances((chain.TipPose(q_clear) * X_PT) * tool_sample);
+      for (size_t b = 0; b < start.size(); ++b) {
+        fixture_floor[b] = std::min(options.fixture_clearance_m, start[b] - kFixtureSlackM);
+      }
+    }
     const Eigen::Isometry3d X_above = chain.TipPose(q_to);
     Eigen::Vector3d toward(-X_above.translation().x(), -X_above.translation().y(), 0.0);
     toward = toward.norm() > 1e-6 ? toward.normalized() : Eigen::Vector3d::Zero();

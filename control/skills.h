@@ -428,6 +428,14 @@ struct PullOptions {
   int transfer_waypoints = 10;
   double object_clearance_m = 0.03;
   double left_arm_object_radius_m = 0.15;
+  /// Fixed boxes of the workspace other than the object's support (the rack: from the scene file,
+  /// not perceived) that every tool point must keep fixture_clearance_m [m] (>= 0) clear of on the
+  /// transfer's turn and descent (with tool_points_T). A box the tool is already nearer than that
+  /// where the turn starts (just off the rack) must not be approached any further. Empty = no
+  /// check: a long tool turned near the rack swung its shaft into the board and left the hand
+  /// (random-50 seeds 1-4: 2 of the 4 tools lost in the pull).
+  std::vector<ObstacleBox> fixtures;
+  double fixture_clearance_m = 0.02;
   double max_joint_step_rad = 0.3;
   /// The drag direction may turn about z_R away from the action's direction (ActionDirection) by
   /// up to this much, either way, in steps of pull_turn_step_rad [rad], in [0, pi/2] (the first

@@ -2,11 +2,13 @@
 // drag of each action with a stick-like tool (PlanPull, no simulator).
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "control/clearance.h"
 #include "control/kinematics.h"
 #include "control/skills.h"
 #include "robot/robot_description.h"
@@ -205,6 +207,62 @@ TEST_F(ToolActionPlanTest, TheDragKeepsTheObjectOnItsSupport) {
   options.support_travel_fraction = 0.5;
   options.support_edge_margin_m = -0.01;
   EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("support_edge_margin_m")));
+}
+
+// The transfer turns the tool high above the table, where a fixture (the rack) may stand in the
+// way of a long tool's far end: given the fixture's box, no tool point comes within
+// fixture_clearance_m of it on the turn and the descent, and the plan goes around it.
+TEST_F(ToolActionPlanTest, TheTransferKeepsTheToolClearOfTheFixtures) {
+  const robot::RobotDescription& desc = *robot_;
+  const Eigen::Isometry3d X_PT = StickInTheHand(desc);
+  ToolEffector effector = StickEffector();
+  // The stick's points every centimetre along its axis; the effector's, its last 3 cm.
+  effector.tool_points_T.resize(3, 31);
+  for (int i = 0; i <= 30; ++i) effector.tool_points_T.col(i) = Eigen::Vector3d(0.0, 0.0, 0.01 * i);
+  effector.points_T = effector.tool_points_T.rightCols(4);
+  PullOptions options = FewOrientations();
+  const Eigen::Vector3d p_RO(-0.45, 0.12, -0.065);
+  constexpr double kRadius = 0.035;
+  const KinematicChain chain = MakeRightArmChain(desc.model, desc.palm_frame);
+  // From above another object, to the right, the hand holding the stick out over the table.
+  const PullPlan before = PlanPull(desc, desc.HomeQ(), X_PT, StickEffector(), Eigen::Vector3d(-0.40, 0.30, -0.065),
+                                   kRadius, options);
+  ASSERT_TRUE(before.complete()) << before.result.reason;
+  const Eigen::VectorXd q_start = before.q_above;
+  const PullPlan free = PlanPull(desc, q_start, X_PT, effector, p_RO, kRadius, options);
+  ASSERT_TRUE(free.complete()) << free.result.reason;
+  ASSERT_GE(free.transfer.size(), 6u);
+  // A 6 cm box where the stick's far end passes two thirds of the way through that transfer.
+  const Eigen::VectorXd& q_in_the_way = free.transfer[free.transfer.size() * 2 / 3];
+  ObstacleBox box;
+  box.name = "rack_board";
+  box.X_RB.translation() = (chain.TipPose(q_in_the_way) * X_PT) * Eigen::Vector3d(0.0, 0.0, 0.30);
+  box.half = Eigen::Vector3d::Constant(0.03);
+  options.fixtures = {box};
+  const PullPlan blocked = PlanPull(desc, q_start, X_PT, effector, p_RO, kRadius, options);
+  EXPECT_FALSE(blocked.complete());
+  EXPECT_THAT(blocked.result.reason, HasSubstr("of rack_board"));
+  // With every orientation the planner samples by default, another one goes around the box.
+  options.min_elevation_rad = PullOptions{}.min_elevation_rad;
+  options.max_elevation_rad = PullOptions{}.max_elevation_rad;
+  options.elevation_step_rad = PullOptions{}.elevation_step_rad;
+  options.max_yaw_rad = PullOptions{}.max_yaw_rad;
+  options.max_roll_rad = PullOptions{}.max_roll_rad;
+  const PullPlan around = PlanPull(desc, q_start, X_PT, effector, p_RO, kRadius, options);
+  ASSERT_TRUE(around.complete()) << around.result.reason;
+  // Off the rack first (straight back and up, unchecked), then the turn and the descent.
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const Eigen::VectorXd& q : around.transfer) {
+    const Eigen::Matrix3Xd tool = (chain.TipPose(q) * X_PT) * effector.tool_points_T;
+    for (Eigen::Index i = 0; i < tool.cols(); ++i) nearest = std::min(nearest, BoxDistance(box, tool.col(i)));
+  }
+  EXPECT_GE(nearest, options.fixture_clearance_m - 1e-9);
+
+  options.fixture_clearance_m = -0.01;
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("fixture_clearance_m")));
+  options.fixture_clearance_m = 0.02;
+  options.fixtures[0].half.x() = 0.0;
+  EXPECT_THAT([&] { options.Validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("rack_board")));
 }
 
 // A count option: 0 is accepted, a negative count refused with a message naming the field.
