@@ -529,7 +529,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
       }
       if (back.size() == 2) p.lift.insert(p.lift.end(), back.begin(), back.end());
     }
-    if (ok && !clearance.empty() && !ClearTransfer(clearance, solver, chain, q_now, desc.HomeQ(), options, &p, &result)) {
+    if (ok && !clearance.empty() &&
+        !ClearTransfer(clearance, solver, chain, q_now, desc.HomeQ(), options, &p, &result)) {
       last_failure = result.last_blocked;
       ok = false;
     }
