@@ -378,7 +378,8 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   // would land in another IK branch (a jump, not a straight line), so few restarts and a short
   // Ipopt run make a failing waypoint cheap.
   const IkOptions path_options = LimitedIk(options.ik, options.path_restarts, options.path_ipopt_iterations);
-  CartesianSolver solver(chain, desc.HomeQ(), path_options);
+  const Eigen::VectorXd q_home = desc.HomeQ();
+  CartesianSolver solver(chain, q_home, path_options);
   const std::vector<std::string> names = robot.JointNames();
   for (const auto* hand : {&desc.hand_open, &desc.hand_preshape, &desc.hand_closed}) {
     for (const auto& [joint, value] : *hand) {
@@ -530,7 +531,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
       if (back.size() == 2) p.lift.insert(p.lift.end(), back.begin(), back.end());
     }
     if (ok && !clearance.empty() &&
-        !ClearTransfer(clearance, solver, chain, q_now, desc.HomeQ(), options, &p, &result)) {
+        !ClearTransfer(clearance, solver, chain, q_now, q_home, options, &p, &result)) {
       last_failure = result.last_blocked;
       ok = false;
     }
@@ -602,7 +603,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   };
   for (int pass = 0; pass < 2 && !planned; ++pass) {
     if (pass == 1 && (result.candidates_feasible > 0 || options.fallback_restarts == 0)) break;
-    CartesianSolver screen(chain, desc.HomeQ(), pass == 0 ? screen_options : fallback_options);
+    CartesianSolver screen(chain, q_home, pass == 0 ? screen_options : fallback_options);
     const double min_cos = pass == 0 ? options.min_approach_cos : options.fallback_min_approach_cos;
     for (size_t i = 0; i < slides.size() && !planned; ++i) {
       std::vector<Candidate> feasible;

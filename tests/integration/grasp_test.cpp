@@ -2,6 +2,7 @@
 // holds them by contact forces alone (issue 4, item 5).
 #include <algorithm>
 #include <string>
+#include <string_view>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -34,6 +35,26 @@ const toollib::ToolModel* LibraryModel(const LoadedScene& scene, const std::stri
     if (t.name == name) return &t;
   }
   return nullptr;
+}
+
+// grasp-gt's case of `tool` alone in `cell`, grasped as the episode grasps it: after the look at
+// the rack, whose torso turn leaves the hand hanging beside the hip.
+GraspCaseResult GraspAfterTheRackLook(const std::string& tool, const std::string& cell) {
+  SceneRequest request;
+  request.tools = {tool};
+  request.cells = {cell};
+  const LoadedScene scene = LoadScene(request);
+  GraspCaseOptions after_look;
+  after_look.from_rack_look = true;
+  return RunGraspCase(scene, tool, cell, request.seed, after_look);
+}
+
+// No robot body touches the rack at any of the grasp's `stages` ("staged", "at_grasp", ...).
+void ExpectClearOfTheRackAt(const GraspCaseResult& r, std::initializer_list<std::string_view> stages) {
+  for (const auto& h : r.handle_in_hand) {
+    if (std::find(stages.begin(), stages.end(), h.stage) == stages.end()) continue;
+    for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
+  }
 }
 
 class GraspTest : public ::testing::TestWithParam<const char*> {};
@@ -125,20 +146,11 @@ TEST(GraspHandle, RoutesTheTransferOverTheRacksLedge) {
 // bends up first, then swings out: the transfer clears the rack, the chosen pose keeps the hand
 // clear of it, and the stick is grasped and lifted.
 TEST(GraspHandle, BendsTheArmUpFirstWhenTheHandHangsBelowTheLedge) {
-  SceneRequest request;
-  request.tools = {"stick_2"};
-  request.cells = {"pos1"};
-  const LoadedScene scene = LoadScene(request);
-  GraspCaseOptions after_look;
-  after_look.from_rack_look = true;
-  const GraspCaseResult r = RunGraspCase(scene, "stick_2", "pos1", request.seed, after_look);
+  const GraspCaseResult r = GraspAfterTheRackLook("stick_2", "pos1");
   EXPECT_TRUE(r.grasp.transfer_raised) << "the direct swing no longer meets the rack: pick another case";
   EXPECT_FALSE(r.grasp.hand_touches_fixture) << r.grasp.last_touching << "; " << r.grasp.paths_blocked
                                              << " paths blocked, the last: " << r.grasp.last_blocked;
-  for (const auto& h : r.handle_in_hand) {
-    if (h.stage != "staged" && h.stage != "at_grasp") continue;
-    for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
-  }
+  ExpectClearOfTheRackAt(r, {"staged", "at_grasp"});
   ExpectGraspedLiftedAndHeld(r);
 }
 
@@ -150,21 +162,12 @@ TEST(GraspHandle, BendsTheArmUpFirstWhenTheHandHangsBelowTheLedge) {
 // of the handle). The transfer goes through the home posture instead, keeps clear of the rack, and
 // the stick is grasped at its handle's centre, lifted and held.
 TEST(GraspHandle, ReachesAToolLyingAcrossTheRackThroughTheHomePosture) {
-  SceneRequest request;
-  request.tools = {"stick_1"};
-  request.cells = {"rot3"};
-  const LoadedScene scene = LoadScene(request);
-  GraspCaseOptions after_look;
-  after_look.from_rack_look = true;
-  const GraspCaseResult r = RunGraspCase(scene, "stick_1", "rot3", request.seed, after_look);
+  const GraspCaseResult r = GraspAfterTheRackLook("stick_1", "rot3");
   EXPECT_EQ(r.grasp.transfer_route, "home") << r.grasp.paths_blocked << " paths blocked, the last: "
                                              << r.grasp.last_blocked;
   EXPECT_NEAR(r.grasp.slide_m, 0.0, 1e-9);
   EXPECT_LT(r.grasp.hand_touch_depth_m, 0.02);
-  for (const auto& h : r.handle_in_hand) {
-    if (h.stage != "staged") continue;
-    for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
-  }
+  ExpectClearOfTheRackAt(r, {"staged"});
   ExpectGraspedLiftedAndHeld(r);
 }
 
