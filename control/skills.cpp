@@ -268,7 +268,7 @@ IkOptions LimitedIk(const IkOptions& base, int restarts, int ipopt_iterations) {
 /// options.transfer_raise_m in turn: the transfer's end raised (then down onto it), the current
 /// palm raised (then across), and both; then joint by joint: the arm bent up first, or the torso
 /// turned last; then through the home posture q_home (the arm's joints and the torso's), alone or
-/// followed by the transfer's end raised. The first clear one sets plan->transfer_via and
+/// followed by each raised route as from home. The first clear one sets plan->transfer_via and
 /// plan->transfer_route. False when the transfer stays blocked (counted and described in *result).
 bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const KinematicChain& chain,
                    const Eigen::VectorXd& q_now, const Eigen::VectorXd& q_home, const GraspOptions& options,
@@ -305,23 +305,32 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   Eigen::Vector3d inward = -chain.TipPose(plan->q_pregrasp).translation();  // toward the robot's z axis
   inward.z() = 0;
   inward = inward.norm() > 1e-6 ? inward.normalized() : Eigen::Vector3d::Zero();
-  std::vector<Eigen::VectorXd> raised_ends;  // the transfer's end raised, kept for the routes through home
-  for (const double raise : options.transfer_raise_m) {
+  // The raised routes from posture `from` (prefixed by `head`, the via postures that lead there):
+  // for each of transfer_raise_m, above the transfer's end, then down onto it; the same pulled in
+  // toward the robot (the hand comes up inside the rack's edge, then moves out over it); above
+  // `from`'s palm; and above it, then inside the end.
+  auto raised_routes = [&](const std::vector<Eigen::VectorXd>& head, const Eigen::VectorXd& from, double raise) {
     const Eigen::Vector3d up = raise * Eigen::Vector3d::UnitZ();
-    std::vector<std::vector<Eigen::VectorXd>> routes;
-    // Above the transfer's end, then down onto it; the same pulled in toward the robot (the hand
-    // comes up inside the rack's edge, then moves out over it); above the current palm.
     const auto above_end = shifted(plan->q_pregrasp, up);
     const auto inside_end = shifted(plan->q_pregrasp, up + options.transfer_inward_m * inward);
-    const auto above_now = shifted(q_now, up);
-    for (const auto& end : {above_end, inside_end}) {
-      if (end) raised_ends.push_back(*end);
-    }
-    if (above_end) routes.push_back({*above_end});
-    if (inside_end) routes.push_back({*inside_end});
-    if (above_now) routes.push_back({*above_now});
-    if (above_now && inside_end) routes.push_back({*above_now, *inside_end});
-    if (take_first_clear(routes, "raised")) return true;
+    const auto above_from = shifted(from, up);
+    std::vector<std::vector<Eigen::VectorXd>> routes;
+    auto add = [&](std::initializer_list<const std::optional<Eigen::VectorXd>*> via) {
+      std::vector<Eigen::VectorXd> route = head;
+      for (const auto* q : via) {
+        if (!*q) return;
+        route.push_back(**q);
+      }
+      routes.push_back(std::move(route));
+    };
+    add({&above_end});
+    add({&inside_end});
+    add({&above_from});
+    add({&above_from, &inside_end});
+    return routes;
+  };
+  for (const double raise : options.transfer_raise_m) {
+    if (take_first_clear(raised_routes({}, q_now, raise), "raised")) return true;
   }
   // Joint by joint: after the look at the rack the hand hangs beside the torso, below the top of
   // the rack's ledge, and every route above could sweep the fingers through the ledge's near end
@@ -353,9 +362,13 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   // of 32 grasped before this route, 22 with it; random-50 seeds 1-4: 176 -> 179 own grasps).
   Eigen::VectorXd home = q_now;
   for (const int index : chain.q_indices()) home[index] = q_home[index];
-  std::vector<std::vector<Eigen::VectorXd>> routes{{home}};
-  for (const Eigen::VectorXd& end : raised_ends) routes.push_back({home, end});
-  if (take_first_clear(routes, "home")) return true;
+  if (take_first_clear({{home}}, "home")) return true;
+  // From home on, the raised routes as from home itself (grasp-gt --from-rack-look: the hooks and
+  // spatula_3 at pos1 reached the poses clear of the board only from above the palm at home, and
+  // took poses 16-17 mm into the board instead, which dropped them).
+  for (const double raise : options.transfer_raise_m) {
+    if (take_first_clear(raised_routes({home}, home, raise), "home")) return true;
+  }
   ++result->paths_blocked;
   result->last_blocked = Cat("the transfer would bring ", hit->link, " within ", options.obstacle_margin_m, " m of ",
                              hit->obstacle, " (at ", hit->p_R.transpose(), " m in R)");

@@ -104,10 +104,12 @@ struct GraspOptions {
   /// transfer, checked every transfer_check_step_rad (> 0) of joint motion. A transfer that would
   /// pass through one is rerouted through via postures, for each of transfer_raise_m [m] in turn:
   /// above its end (then down onto it), above it and transfer_inward_m [m] (>= 0) closer to the
-  /// robot (then out over the rack's edge), above the current palm, or the last two; a transfer
-  /// that stays blocked rejects the candidate. The straight lines from the staging pose on are not checked
-  /// (a handle near the ledge puts the open thumb within a centimetre of it there). Empty = no check (the open hand can then catch
-  /// on the rack's ledge and the transfer times out: 6 of 50 random episodes in session 9).
+  /// robot (then out over the rack's edge), above the current palm, or the last two; then joint
+  /// by joint, then through the home posture (see GraspResult::transfer_route); a transfer
+  /// that stays blocked rejects the candidate. The straight lines from the staging pose on are not
+  /// checked (a handle near the ledge puts the open thumb within a centimetre of it there).
+  /// Empty = no check (the open hand can then catch on the rack's ledge and the transfer times
+  /// out: 6 of 50 random episodes in session 9).
   std::vector<ObstacleBox> obstacles;
   double obstacle_margin_m = 0.0;
   /// With obstacles: grasp poses at which the open or the preshaped hand would come within
@@ -217,7 +219,7 @@ struct GraspResult {
   bool transfer_raised = false; // the chosen transfer goes through via postures (palm raised, or joint by joint)
   /// How the chosen transfer avoids the fixtures: "direct" (no via posture), "raised" (the palm
   /// raised at either end), "arm_first" (the arm bent up, then the torso), "torso_last", "home"
-  /// (through the home posture).
+  /// (through the home posture, then as a transfer from home would go).
   std::string transfer_route = "direct";
   int candidates_touching = 0;  // reachable grasp poses put last: the hand would touch a fixture there
   std::string last_touching;    // the last of those: which link, which obstacle

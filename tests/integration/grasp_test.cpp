@@ -171,6 +171,22 @@ TEST(GraspHandle, ReachesAToolLyingAcrossTheRackThroughTheHomePosture) {
   ExpectGraspedLiftedAndHeld(r);
 }
 
+// hook_2 upright at the rack's end beside the robot (pos1), grasped after the look at the rack.
+// Its palm poses that keep the hand clear of the board are reached from home only over the palm
+// raised there; from the hand beside the hip every route, the home posture alone included, swept
+// the fingers through the ledge, and the grasp took a pose 17 mm into the board, from which the
+// hook dropped out in the lift (so did hook_3 and spatula_3 at pos1: grasp-gt --from-rack-look
+// pos1 29 of 32). The transfer goes home, then on over the raised palm: the hand stays clear of
+// the rack, and the hook is grasped, lifted and held.
+TEST(GraspHandle, GoesOnFromTheHomePostureAsFromHome) {
+  const GraspCaseResult r = GraspAfterTheRackLook("hook_2", "pos1");
+  EXPECT_EQ(r.grasp.transfer_route, "home")
+      << r.grasp.paths_blocked << " paths blocked, the last: " << r.grasp.last_blocked;
+  EXPECT_LT(r.grasp.hand_touch_depth_m, 0.005) << r.grasp.last_touching;
+  ExpectClearOfTheRackAt(r, {"staged"});
+  ExpectGraspedLiftedAndHeld(r);
+}
+
 // stick_2 at the rack's end beside the robot (pos1): the reachable palm pose of lowest rest cost
 // puts the open hand's fingertips against the rack's board, which stops the palm 7 mm short of the
 // handle and tilted, and the closing fingers flick the stick off the rack (9 of the 10 failures at
