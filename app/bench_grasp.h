@@ -15,7 +15,8 @@ namespace toolbench::app {
 
 /// How one ground-truth grasp case is judged (issue 4): after GraspHandle lifted the tool, the
 /// hand holds it for `hold_time`; success = the tool rose at least `min_lift_m` above its rest
-/// height, the handle centre moved less than `max_slip_m` in the palm frame during the hold, and
+/// height, the point of the handle's axis nearest the hand's grasp centre when the hold begins
+/// (where the hand holds it) moved less than `max_slip_m` in the palm frame during the hold, and
 /// the tool touched only robot bodies ("r_" prefix) during the hold.
 struct GraspCaseOptions {
   double hold_time = 2.0;       // judged hold [s], > 0
@@ -43,7 +44,8 @@ struct GraspCaseResult {
   control::GraspResult grasp;                 // what the skill reported
   double lift_m = 0.0;                        // tool origin height above its settled rest height after the lift [m]
   double palm_rise_m = 0.0;           // palm height at the end above the planned grasp pose (ground truth) [m]
-  double slip_m = 0.0;                        // largest displacement of the handle centre in P during the hold [m]
+  double slip_m = 0.0;  // largest displacement in P of the handle axis point held (above), in the hold [m]
+  double handle_centre_slip_m = 0.0;          // the same of the handle centre (apart by the grasp's slide) [m]
   double slip_rad = 0.0;                      // largest rotation of the tool relative to P during the hold [rad]
   std::vector<std::string> foreign_contacts;  // non-robot bodies the tool touched during the hold
   std::vector<std::string> robot_contacts;    // "robot body-other body" touching when the skill ended

@@ -130,7 +130,7 @@ TEST(PlotsTest, BadChartsAreNamed) {
 }
 
 SweepLine GraspLine(int index, const std::string& tool, const std::string& cell, bool success,
-                    const std::string& reason) {
+                    const std::string& reason, double handle_centre_slip_m = 0.001) {
   return {{"protocol", "grasp-gt"},
           {"index", index},
           {"id", tool + "/" + cell},
@@ -142,16 +142,18 @@ SweepLine GraspLine(int index, const std::string& tool, const std::string& cell,
             {"reason", reason},
             {"wall_ms", 100.0},
             {"sim_time_s", 5.0},
-            {"slip_m", 0.001}}}};
+            {"slip_m", 0.001},
+            {"handle_centre_slip_m", handle_centre_slip_m},
+            {"slip_deg", 2.0}}}};
 }
 
 TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
   BenchRequest request;
   request.out_dir = TempDir("grasp_report");
   std::vector<SweepLine> lines = {GraspLine(0, "hoe_1", "pos1", true, ""),
-                                  GraspLine(1, "hoe_1", "rot2", false, "slip: 6 mm"),
+                                  GraspLine(1, "hoe_1", "rot2", false, "slip: 6 mm", /*handle_centre_slip_m=*/0.004),
                                   GraspLine(2, "rake_1", "pos1", true, ""),
-                                  GraspLine(3, "rake_1", "rot2", true, ""),
+                                  GraspLine(3, "rake_1", "rot2", true, "", /*handle_centre_slip_m=*/0.006),
                                   GraspLine(5, "rake_2", "rot2", false, "unreachable: no palm pose")};
   lines.push_back({{"protocol", "grasp-gt"}, {"index", 4}, {"id", "x/pos1"}, {"ok", false}, {"error", "crashed"}});
   ReportGrasp(request, lines);
@@ -166,10 +168,16 @@ TEST(BenchReportTest, GraspReportCountsPerCellAndToolAndDrawsThem) {
   EXPECT_DOUBLE_EQ(summary["per_cell"]["rot2"].get<double>(), 1.0 / 3.0);
   EXPECT_DOUBLE_EQ(summary["per_tool"]["rake_1"].get<double>(), 1.0);
   EXPECT_EQ(summary["failure_reasons"]["slip"], 1);
+  // rake_1/rot2 held where the hand holds it, but its handle centre moved 6 mm; hoe_1/rot2 the
+  // other way round: by the criterion before session 48, counted beside, one lost and one gained.
+  EXPECT_EQ(summary["cells_grasped_by_handle_centre"], 3);
+  EXPECT_DOUBLE_EQ(summary["slip_deg_median_successful"].get<double>(), 2.0);
   const std::string md = ReadText(request.out_dir / "summary.md");
   EXPECT_THAT(md, HasSubstr("![grasp success per cell](per_cell.png)"));
   EXPECT_THAT(md, HasSubstr("Grasped 3 of 5 cells (60 %). 1 cells have no palm pose"));
   EXPECT_THAT(md, HasSubstr("of the other 4, 75 % were grasped"));
+  EXPECT_THAT(md, HasSubstr("moved 1.0 mm in the hand and turned 2.0 deg"));
+  EXPECT_THAT(md, HasSubstr("Judged by the handle's centre instead of the point held (sessions before 48), 3 cells"));
   EXPECT_THAT(md, HasSubstr("started from the home posture"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_cell.png"));
   EXPECT_TRUE(std::filesystem::exists(request.out_dir / "per_tool.png"));
