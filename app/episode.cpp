@@ -592,9 +592,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // the tool in the hand. They hold it out by the handle's end away from the effector, as the
     // robot's own grasp chokes it (GraspToolForAction: 60 % of the free slide), so that it
     // reaches further. Sets X_PT to where the person put it; recorded as assisted.
-    auto hand_over_tool = [&](const Eigen::Vector3d& p_R_point) {
+    // turn_rad: the person turns the tool by this about its handle's axis first (asked to, when
+    // the tool as they gave it left no plan of the action).
+    auto hand_over_tool = [&](const Eigen::Vector3d& p_R_point, double turn_rad = 0.0) {
       const Eigen::Isometry3d X_TH = ChokedHandleFrame(desc, perception::SidecarHandleFrame(*model),
-                                                       model->effector.center, model->handle.length);
+                                                       model->effector.center, model->handle.length) *
+                                     Eigen::AngleAxisd(turn_rad, Eigen::Vector3d::UnitZ());
       // The open hand waits turned 35 deg to the robot's right, between the table and the rack,
       // and 20 cm up: clear of the rack (a long tool put in a hand held out toward the rack
       // overlapped it and stuck there), high above the table, and where the head can look at it.
@@ -807,10 +810,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // Asks for the tool as the hand-over gives it (the person takes it out of the hand first: it
     // is out of the scene meanwhile), looks at it in the hand again and records why and how in
     // s.details. Recorded as assisted; the grasp stays the robot's own. True when holding.
-    auto regrip = [&](StageRecord& s, const std::string& why) {
+    auto regrip = [&](StageRecord& s, const std::string& why, double turn_rad = 0.0) {
       s.details["regrip_after"] = why;
+      s.details["regrip_turn_deg"] = turn_rad * 180 / M_PI;
       world.TeleportFreeBody(tool_body, scene.composed.X_WR * Eigen::Translation3d(0.0, 3.0, 0.5));
-      const control::HandOverResult h = hand_over_tool(PalmPoseFromEncoders(desc, robot).translation());
+      const control::HandOverResult h = hand_over_tool(PalmPoseFromEncoders(desc, robot).translation(), turn_rad);
       stage_frame("re_grip");
       s.details["regrip_holding"] = h.holding;
       if (!h.holding) return false;
@@ -874,6 +878,20 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         if (regrip(s, std::string(control::ToString(p.status)) + ": " + p.reason)) {
           p = control::PullObject(robot, desc, X_PT, effector, p_RB, ball_radius, pull_options);
         }
+      }
+      // The tool as the person gave it leaves no plan either (a hoe's blade or a spatula's face
+      // turned where no wrist orientation puts it behind the ball: random seeds 1-4, 3 pulls):
+      // it asks for the tool turned about its handle's axis, half a turn, then a quarter either
+      // way, and plans again after each.
+      if (control::PlanningFailed(p.status) && result.assisted && allow_regrip) {
+        int turns = 0;
+        for (const double turn : {M_PI, M_PI / 2, -M_PI / 2}) {
+          ++turns;
+          if (!regrip(s, std::string(control::ToString(p.status)) + ": " + p.reason, turn)) break;
+          p = control::PullObject(robot, desc, X_PT, effector, p_RB, ball_radius, pull_options);
+          if (!control::PlanningFailed(p.status)) break;
+        }
+        s.details["regrip_turns"] = turns;
       }
       s.ok = p.status == control::PullStatus::kPulled;
       s.outcome = control::ToString(p.status);
