@@ -352,9 +352,8 @@ void ReportGrasp(const BenchRequest& request, const std::vector<SweepLine>& line
   }
   summary["start"] = start;
   summary["success_criterion"] =
-      "tool >= 5 cm above rest, its handle axis point nearest the hand's grasp centre moves < 5 mm in the palm frame "
-      "and it "
-      "touches only r_* bodies during a 2 s hold";
+      "tool >= 5 cm above rest; during a 2 s hold, its handle axis point nearest the hand's grasp centre moves "
+      "< 5 mm in the palm frame and it touches only r_* bodies";
   for (const auto& [name, t] : per_tool) summary["per_tool"][name] = t.Rate();
   for (const auto& [name, t] : per_cell) summary["per_cell"][name] = t.Rate();
   summary["failure_reasons"] = nlohmann::json::object();
