@@ -305,15 +305,29 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   Eigen::Vector3d inward = -chain.TipPose(plan->q_pregrasp).translation();  // toward the robot's z axis
   inward.z() = 0;
   inward = inward.norm() > 1e-6 ? inward.normalized() : Eigen::Vector3d::Zero();
-  // The raised routes from posture `from` (prefixed by `head`, the via postures that lead there):
-  // for each of transfer_raise_m, above the transfer's end, then down onto it; the same pulled in
+  // The postures above the transfer's end raised by transfer_raise_m[i], and the same pulled in
+  // toward the robot; solved when first asked for (the routes from the current posture and from
+  // home share them).
+  struct RaisedEnd {
+    std::optional<Eigen::VectorXd> above;
+    std::optional<Eigen::VectorXd> inside;
+  };
+  std::vector<std::optional<RaisedEnd>> raised_ends(options.transfer_raise_m.size());
+  auto raised_end = [&](size_t i) -> const RaisedEnd& {
+    if (!raised_ends[i]) {
+      const Eigen::Vector3d up = options.transfer_raise_m[i] * Eigen::Vector3d::UnitZ();
+      raised_ends[i] =
+          RaisedEnd{shifted(plan->q_pregrasp, up), shifted(plan->q_pregrasp, up + options.transfer_inward_m * inward)};
+    }
+    return *raised_ends[i];
+  };
+  // The raised routes from posture `from` (prefixed by `head`, the via postures that lead there),
+  // raised by transfer_raise_m[i]: above the transfer's end, then down onto it; the same pulled in
   // toward the robot (the hand comes up inside the rack's edge, then moves out over it); above
   // `from`'s palm; and above it, then inside the end.
-  auto raised_routes = [&](const std::vector<Eigen::VectorXd>& head, const Eigen::VectorXd& from, double raise) {
-    const Eigen::Vector3d up = raise * Eigen::Vector3d::UnitZ();
-    const auto above_end = shifted(plan->q_pregrasp, up);
-    const auto inside_end = shifted(plan->q_pregrasp, up + options.transfer_inward_m * inward);
-    const auto above_from = shifted(from, up);
+  auto raised_routes = [&](const std::vector<Eigen::VectorXd>& head, const Eigen::VectorXd& from, size_t i) {
+    const auto& [above_end, inside_end] = raised_end(i);
+    const auto above_from = shifted(from, options.transfer_raise_m[i] * Eigen::Vector3d::UnitZ());
     std::vector<std::vector<Eigen::VectorXd>> routes;
     auto add = [&](std::initializer_list<const std::optional<Eigen::VectorXd>*> via) {
       std::vector<Eigen::VectorXd> route = head;
@@ -329,8 +343,8 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
     add({&above_from, &inside_end});
     return routes;
   };
-  for (const double raise : options.transfer_raise_m) {
-    if (take_first_clear(raised_routes({}, q_now, raise), "raised")) return true;
+  for (size_t i = 0; i < raised_ends.size(); ++i) {
+    if (take_first_clear(raised_routes({}, q_now, i), "raised")) return true;
   }
   // Joint by joint: after the look at the rack the hand hangs beside the torso, below the top of
   // the rack's ledge, and every route above could sweep the fingers through the ledge's near end
@@ -366,8 +380,8 @@ bool ClearTransfer(const ArmClearance& clearance, CartesianSolver& solver, const
   // From home on, the raised routes as from home itself (grasp-gt --from-rack-look: the hooks and
   // spatula_3 at pos1 reached the poses clear of the board only from above the palm at home, and
   // took poses 16-17 mm into the board instead, which dropped them).
-  for (const double raise : options.transfer_raise_m) {
-    if (take_first_clear(raised_routes({home}, home, raise), "home")) return true;
+  for (size_t i = 0; i < raised_ends.size(); ++i) {
+    if (take_first_clear(raised_routes({home}, home, i), "home")) return true;
   }
   ++result->paths_blocked;
   result->last_blocked = Cat("the transfer would bring ", hit->link, " within ", options.obstacle_margin_m, " m of ",
