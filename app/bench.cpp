@@ -54,6 +54,9 @@ int RunBench(const BenchRequest& request) {
   if (!request.check_action_before_grasp && request.protocol != "random") {
     ThrowInvalid("bench: --no-action-check applies to protocol random only, not '", request.protocol, "'");
   }
+  if (!request.look_again_after_failed_grasp && request.protocol != "random") {
+    ThrowInvalid("bench: --no-look-again applies to protocol random only, not '", request.protocol, "'");
+  }
   if (request.from_rack_look && request.protocol != "grasp-gt") {
     ThrowInvalid("bench: --from-rack-look applies to protocol grasp-gt only, not '", request.protocol, "'");
   }

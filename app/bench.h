@@ -39,6 +39,7 @@ struct BenchRequest {
   bool hindsight = false;
   bool best_tool_only = false;    // random: EpisodeRequest::best_tool_only (table53 scenes hold one tool)
   bool check_action_before_grasp = true;  // random: EpisodeRequest::check_action_before_grasp
+  bool look_again_after_failed_grasp = true;  // random: EpisodeRequest::look_again_after_failed_grasp
   bool from_rack_look = false;    // grasp-gt: GraspCaseOptions::from_rack_look
 };
 

@@ -140,6 +140,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
     episode.quiet = true;
     episode.best_tool_only = request.best_tool_only;
     episode.check_action_before_grasp = request.check_action_before_grasp;
+    episode.look_again_after_failed_grasp = request.look_again_after_failed_grasp;
     episode.frames = request.frames;
     episode.out_dir = request.out_dir / "episodes" / std::to_string(c.index);
     nlohmann::json result = EpisodeJson(RunEpisode(episode));
@@ -154,6 +155,7 @@ int RunRandomEpisodesBench(const BenchRequest& request) {
   info["hindsight"] = request.hindsight;
   info["best_tool_only"] = request.best_tool_only;
   info["check_action_before_grasp"] = request.check_action_before_grasp;
+  info["look_again_after_failed_grasp"] = request.look_again_after_failed_grasp;
   ReportRandomEpisodes(request, RunSweep(SweepOptionsFor(request, "random", info), cases, run_case, prepare));
   return 0;
 }
@@ -192,6 +194,11 @@ void ReportRandomEpisodes(const BenchRequest& request, const std::vector<SweepLi
       // rates the cells: a handle out of reach is the hand-over's case, not a failed grasp.
       if (DetailOf(StageOf(r, "grasp_tool"), "grasp_planned", false)) {
         count("grasp_success_within_reach", r.value("grasp_success", false));
+      }
+      // Over the episodes whose grasp failed once it moved, and that looked at the rack again
+      // (EpisodeRequest::look_again_after_failed_grasp).
+      if (DetailOf(StageOf(r, "grasp_tool"), "looks_again", 0) > 0) {
+        count("grasp_success_after_look_again", r.value("grasp_success", false));
       }
       if (r["truth"].contains("chosen_tool_perception")) {
         // Ground truth: the tool the robot went for was perceived perfectly (Table 5.3's score 1).

@@ -271,11 +271,18 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
   eye_options.noise.enabled = request.noise;
   sim::Renderer eye(gl, world, eye_options);
   int frame_count = 0;
-  auto see = [&]() {
-    RgbdFrame frame = eye.Render(world, DeriveSeed(request.scene.seed, "frame/" + std::to_string(frame_count++)));
+  int extra_frame_count = 0;
+  // Each frame's sensor noise is drawn from its own seed: the n-th frame of the episode, or the
+  // n-th of the frames that only some episodes take (extra: the look at the rack after a failed
+  // grasp), so that those leave the noise of every later frame as it was.
+  auto see_frame = [&](bool extra) {
+    const std::string label =
+        extra ? "extra_frame/" + std::to_string(extra_frame_count++) : "frame/" + std::to_string(frame_count++);
+    RgbdFrame frame = eye.Render(world, DeriveSeed(request.scene.seed, label));
     frame.X_RC = CameraPoseFromEncoders(desc, robot);
     return frame;
   };
+  auto see = [&]() { return see_frame(false); };
   auto q_model = [&]() { return ModelQ(desc, robot.JointNames(), robot.ReadEncoders()); };
   int frame_index = 0;
   auto stage_frame = [&](const std::string& stage) {
@@ -447,26 +454,35 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     perception::FrameAnalysis analysis;
     RgbdFrame rack_frame;
     const perception::ToolAnalyzer& analyzer = *resources->analyzer;
-    const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
+    // Looks at the rack and analyses every tool in view (into analysis and rack_frame; again: a
+    // look that only some episodes take, see_frame). Fills tools_seen (the tools found, for the
+    // stage's details) and gaze_converged; returns how many tools were analysed whole.
+    auto look_at_rack = [&](nlohmann::json& tools_seen, bool& gaze_converged, bool again) {
       const LookResult look = LookAt(robot, desc, RackViewTarget(spec), /*arm_down=*/true, free_look);
-      rack_frame = see();
+      gaze_converged = look.gaze.converged;
+      rack_frame = see_frame(again);
       analysis = analyzer.Analyze(rack_frame);
-      result.analysis = analysis;
       int ok = 0;
-      s.details["tools"] = nlohmann::json::array();
+      tools_seen = nlohmann::json::array();
       for (size_t i = 0; i < analysis.tools.size(); ++i) {
         const perception::ToolAnalysis& t = analysis.tools[i];
         ok += t.status == perception::AnalysisStatus::kOk ? 1 : 0;
-        s.details["tools"].push_back({{"segment", i},
-                                      {"status", perception::ToString(t.status)},
-                                      {"reason", t.reason},
-                                      {"model", t.model},
-                                      {"confidence", t.confidence},
-                                      {"handle_center_R", Vec3(t.handle.center)},
-                                      {"handle_axis_R", Vec3(t.handle.axis)},
-                                      {"ms", analysis.times[i].total_ms}});
+        tools_seen.push_back({{"segment", i},
+                              {"status", perception::ToString(t.status)},
+                              {"reason", t.reason},
+                              {"model", t.model},
+                              {"confidence", t.confidence},
+                              {"handle_center_R", Vec3(t.handle.center)},
+                              {"handle_axis_R", Vec3(t.handle.axis)},
+                              {"ms", analysis.times[i].total_ms}});
       }
-      s.details["gaze_converged"] = look.gaze.converged;
+      return ok;
+    };
+    const StageRecord& perceived = run_stage("perceive_tools", [&](StageRecord& s) {
+      bool gaze_converged = false;
+      const int ok = look_at_rack(s.details["tools"], gaze_converged, /*again=*/false);
+      result.analysis = analysis;
+      s.details["gaze_converged"] = gaze_converged;
       if (!request.out_dir.empty()) {
         cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, -1));
         WriteFrame(request.out_dir / "rack_frame", rack_frame, nlohmann::json::object());
@@ -492,8 +508,12 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     // best first: the grasp falls back down this list when a handle is out of reach.
     std::vector<double> predicted(analysis.tools.size(), -std::numeric_limits<double>::infinity());
     std::vector<int> ranking;
-    run_stage("choose_tool", [&](StageRecord& s) {
+    // Predicts each analysed tool's effect (into predicted) and ranks them, best first (into
+    // ranking); each tool's prediction for the stage's details.
+    auto rank_tools = [&]() {
       nlohmann::json per_tool = nlohmann::json::array();
+      predicted.assign(analysis.tools.size(), -std::numeric_limits<double>::infinity());
+      ranking.clear();
       for (size_t i = 0; i < analysis.tools.size(); ++i) {
         const perception::ToolAnalysis& t = analysis.tools[i];
         double p = -std::numeric_limits<double>::infinity();
@@ -526,6 +546,10 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       }
       std::stable_sort(ranking.begin(), ranking.end(),
                        [&](int a, int b) { return predicted[static_cast<size_t>(a)] > predicted[static_cast<size_t>(b)]; });
+      return per_tool;
+    };
+    run_stage("choose_tool", [&](StageRecord& s) {
+      const nlohmann::json per_tool = rank_tools();
       // perceive_tools found a tool, and each analysed tool has a finite prediction.
       TOOLBENCH_DEMAND(!ranking.empty());
       result.chosen_segment = ranking.front();
@@ -614,6 +638,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       X_PT = PalmGraspFrame(desc) * X_TH.inverse();
       return h;
     };
+    std::string rack_png = "rack.png";  // rack_again.png: the tool the robot went for after a second look
     run_stage("grasp_tool", [&](StageRecord& s) {
       // As pull-gt grasps (GraspToolForAction): choked away from the effector, with the effector
       // on the side of the hand from which the wrist can point it forward and down; the whole
@@ -648,10 +673,11 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // it in the ranking have been tried; then, when none of them could be grasped, it is
       // grasped touching.
       const int first_choice = result.chosen_segment;
-      const bool others_to_try = ranking.size() > 1 && !request.best_tool_only;
+      const std::string first_choice_model = result.chosen_tool;
       nlohmann::json tried = nlohmann::json::array();
       double plan_ms = 0.0;
       int candidates = 0;
+      int looks = 0;  // the looks at the rack after the first (perceive_tools)
       control::GraspResult g;
       control::GraspResult first;
       double z0 = 0.0;
@@ -665,6 +691,7 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         candidates += g.candidates;
         tried.push_back({{"segment", segment},
                          {"model", tool->model},
+                         {"look", looks},
                          {"status", control::ToString(g.status)},
                          {"reason", g.reason},
                          {"neighbour_contact_allowed", neighbour_contact_allowed}});
@@ -679,38 +706,99 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // costs ~0.3 s, ~2 s when it fails). The first refused tool is grasped as before when no
       // other passes.
       std::vector<int> refused;  // segments one of whose planned grasps left no plan of the action, in turn
+      std::string first_refused;  // the model of the first tool refused so
       int action_checks = 0;
       double action_check_ms = 0.0;
-      if (others_to_try && request.check_action_before_grasp) {
-        grasp_options.accept_plan = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
-          const int segment = result.chosen_segment;
-          if (std::find(refused.begin(), refused.end(), segment) != refused.end()) {
-            return "another planned grasp of this tool was refused";
+      auto check_action = [&](const Eigen::Isometry3d& X_RP, const Eigen::VectorXd& q_lifted) -> std::string {
+        const int segment = result.chosen_segment;
+        if (std::find(refused.begin(), refused.end(), segment) != refused.end()) {
+          return "another planned grasp of this tool was refused";
+        }
+        const auto check_start = Clock::now();
+        const control::PullPlan plan = control::PlanPull(desc, q_lifted, X_RP.inverse() * tool->X_RT,
+                                                         EffectorOf(*model), ball.p_RB, ball_radius, pull_options);
+        ++action_checks;
+        action_check_ms += Ms(check_start);
+        if (plan.complete()) return "";
+        refused.push_back(segment);
+        if (first_refused.empty()) first_refused = tool->model;
+        return Cat("held that way, no ", control::ToString(pull_options.action), " could be planned (",
+                   control::ToString(plan.result.status), ": ", plan.result.reason, ")");
+      };
+      // Goes down the ranking of the latest look at the rack until a grasp moves the arm (g);
+      // `first`: the first choice's grasp on the first look.
+      auto go_down_ranking = [&]() {
+        const bool others_to_try = ranking.size() > 1 && !request.best_tool_only;
+        refused.clear();
+        if (others_to_try && request.check_action_before_grasp) grasp_options.accept_plan = check_action;
+        int neighbour_blocked = -1;  // the first tool that only a touching grasp would take
+        for (size_t k = 0; k < ranking.size(); ++k) {
+          if (k > 0 && request.best_tool_only) break;
+          try_tool(ranking[k], !others_to_try);
+          if (k == 0 && looks == 0) first = g;
+          if (!control::PlanningFailed(g.status)) break;
+          if (neighbour_blocked < 0 && !grasp_options.neighbour_contact_allowed &&
+              g.candidates_touching_neighbour > 0) {
+            neighbour_blocked = ranking[k];
           }
-          const auto check_start = Clock::now();
-          const control::PullPlan plan = control::PlanPull(desc, q_lifted, X_RP.inverse() * tool->X_RT,
-                                                           EffectorOf(*model), ball.p_RB, ball_radius, pull_options);
-          ++action_checks;
-          action_check_ms += Ms(check_start);
-          if (plan.complete()) return "";
-          refused.push_back(segment);
-          return Cat("held that way, no ", control::ToString(pull_options.action), " could be planned (",
-                     control::ToString(plan.result.status), ": ", plan.result.reason, ")");
-        };
-      }
-      int neighbour_blocked = -1;  // the first tool that only a touching grasp would take
-      for (size_t k = 0; k < ranking.size(); ++k) {
-        if (k > 0 && request.best_tool_only) break;
-        try_tool(ranking[k], !others_to_try);
-        if (k == 0) first = g;
-        if (!control::PlanningFailed(g.status)) break;
-        if (neighbour_blocked < 0 && !grasp_options.neighbour_contact_allowed && g.candidates_touching_neighbour > 0) {
-          neighbour_blocked = ranking[k];
+        }
+        grasp_options.accept_plan = nullptr;
+        if (control::PlanningFailed(g.status) && !refused.empty()) try_tool(refused.front(), !others_to_try);
+        if (control::PlanningFailed(g.status) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
+      };
+      go_down_ranking();
+      // A grasp that moved and failed (the tool slipped out, the hand closed on nothing, or the
+      // arm was stopped on the way) may have knocked the tool over or off the rack, or moved the
+      // others: GraspToolForAction has tried again from the first look's pose and left the hand
+      // open where it started. The robot looks at the rack once more and goes down the new
+      // ranking (the same tool where it now lies, when it is still there) before it asks for help.
+      // Random seeds 1-4, session 48: 10 of 200 own grasps failed so; in 4 the tool was still on
+      // the rack, 1-12 cm from where it was seen.
+      const bool moved_and_failed = g.status != control::GraspStatus::kGrasped && !control::PlanningFailed(g.status);
+      const control::GraspResult before_look = g;
+      const int before_look_segment = result.chosen_segment;
+      const std::string before_look_body = tool_body;
+      const nlohmann::json before_look_truth = result.truth;
+      perception::FrameAnalysis first_look;
+      RgbdFrame first_frame;
+      std::vector<double> first_predicted;
+      nlohmann::json look_again = nullptr;
+      if (moved_and_failed && request.look_again_after_failed_grasp) {
+        first_look = analysis;
+        first_frame = rack_frame;
+        first_predicted = predicted;
+        ++looks;
+        bool gaze_converged = false;
+        nlohmann::json tools_seen;
+        const int ok = look_at_rack(tools_seen, gaze_converged, /*again=*/true);
+        rank_tools();
+        stage_frame("grasp_look_again");
+        look_again = {{"after", control::ToString(before_look.status)},
+                      {"tools_analysed", ok},
+                      {"gaze_converged", gaze_converged},
+                      {"tools", tools_seen}};
+        if (!request.out_dir.empty()) {  // the first look, with the tool that failed; the second
+          cv::imwrite((request.out_dir / "rack.png").string(),
+                      DrawAnalysis(first_frame, first_look, before_look_segment));
+          cv::imwrite((request.out_dir / "rack_again.png").string(), DrawAnalysis(rack_frame, analysis, -1));
+        }
+        rack_png = "rack_again.png";
+        if (!ranking.empty()) go_down_ranking();
+        if (ranking.empty() || control::PlanningFailed(g.status)) {
+          // Nothing on the rack the hand can take now: the hand-over brings the tool that failed
+          // (wherever it fell: select_tool would take the simulated tool now nearest where it was
+          // seen, and score its perception against where it lies now).
+          analysis = std::move(first_look);
+          rack_frame = std::move(first_frame);
+          predicted = std::move(first_predicted);
+          g = before_look;
+          select_tool(before_look_segment);
+          tool_body = before_look_body;
+          result.truth = before_look_truth;
+          z0 = world.ground_truth().Pose(tool_body).translation().z();
+          rack_png = "rack.png";
         }
       }
-      grasp_options.accept_plan = nullptr;
-      if (control::PlanningFailed(g.status) && !refused.empty()) try_tool(refused.front(), !others_to_try);
-      if (control::PlanningFailed(g.status) && neighbour_blocked >= 0) try_tool(neighbour_blocked, true);
       if (control::PlanningFailed(g.status)) {
         // No tool within reach: the hand-over brings the first choice.
         select_tool(first_choice);
@@ -736,40 +824,41 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       s.ok = holding;
       const double z1 = world.ground_truth().Pose(tool_body).translation().z();
       result.grasp_success = holding && !result.assisted && z1 - z0 >= 0.05;
-      s.details = {{"tool_lift_m_truth", z1 - z0},
-                   {"assisted", result.assisted},
-                   // The robot planned a grasp of the tool it went for (its handle within reach) and
-                   // moved: grasp_success's denominator in the random summary's within-reach rate.
-                   {"grasp_planned", !control::PlanningFailed(g.status)},
-                   {"slide_m", g.slide_m},
-                   {"axis_flipped", g.axis_flipped},
-                   {"roll_deg", g.roll_rad * 180 / M_PI},
-                   {"candidates", candidates},
-                   {"first_choice", analysis.tools[static_cast<size_t>(first_choice)].model},
-                   {"tools_tried", tried},
-                   {"paths_blocked", g.paths_blocked},
-                   {"last_blocked", g.last_blocked},
-                   {"transfer_raised", g.transfer_raised},
-                   {"transfer_route", g.transfer_route},
-                   {"candidates_touching", g.candidates_touching},
-                   {"hand_touches_fixture", g.hand_touches_fixture},
-                   {"hand_touch_depth_m", g.hand_touch_depth_m},
-                   {"candidates_touching_neighbour", g.candidates_touching_neighbour},
-                   {"last_neighbour_touch", g.last_neighbour_touch},
-                   {"hand_touches_neighbour", g.hand_touches_neighbour},
-                   {"regrasps", g.regrasps},
-                   {"regrasp_reason", g.regrasp_reason},
-                   {"plan_ms", plan_ms},
-                   {"action_checks", action_checks},
-                   {"action_check_ms", action_check_ms},
-                   {"action_refused", refused.empty() ? "" : analysis.tools[static_cast<size_t>(refused.front())].model},
-                   {"robot_s", {{"transfer", g.transfer_s},
-                                {"approach", g.approach_s},
-                                {"close", g.close_s},
-                                {"lift", g.lift_s}}}};
+      s.details = {
+          {"tool_lift_m_truth", z1 - z0},
+          {"assisted", result.assisted},
+          // The robot planned a grasp of the tool it went for (its handle within reach) and
+          // moved: grasp_success's denominator in the random summary's within-reach rate.
+          {"grasp_planned", !control::PlanningFailed(g.status)},
+          {"slide_m", g.slide_m},
+          {"axis_flipped", g.axis_flipped},
+          {"roll_deg", g.roll_rad * 180 / M_PI},
+          {"candidates", candidates},
+          {"first_choice", first_choice_model},
+          {"tools_tried", tried},
+          {"paths_blocked", g.paths_blocked},
+          {"last_blocked", g.last_blocked},
+          {"transfer_raised", g.transfer_raised},
+          {"transfer_route", g.transfer_route},
+          {"candidates_touching", g.candidates_touching},
+          {"hand_touches_fixture", g.hand_touches_fixture},
+          {"hand_touch_depth_m", g.hand_touch_depth_m},
+          {"candidates_touching_neighbour", g.candidates_touching_neighbour},
+          {"last_neighbour_touch", g.last_neighbour_touch},
+          {"hand_touches_neighbour", g.hand_touches_neighbour},
+          {"regrasps", g.regrasps},
+          {"regrasp_reason", g.regrasp_reason},
+          {"plan_ms", plan_ms},
+          {"action_checks", action_checks},
+          {"action_check_ms", action_check_ms},
+          {"action_refused", first_refused},
+          {"looks_again", looks},
+          {"look_again", look_again},
+          {"robot_s",
+           {{"transfer", g.transfer_s}, {"approach", g.approach_s}, {"close", g.close_s}, {"lift", g.lift_s}}}};
     });
     if (!request.out_dir.empty()) {  // the tool the robot went for, after any fallback
-      cv::imwrite((request.out_dir / "rack.png").string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
+      cv::imwrite((request.out_dir / rack_png).string(), DrawAnalysis(rack_frame, analysis, result.chosen_segment));
     }
     if (!holding) return finish();
 

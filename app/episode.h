@@ -62,6 +62,11 @@ struct EpisodeRequest {
   /// for the next in the ranking, and grasped as before only when no other tool passes (the
   /// robot then asks for it again, the re-grip). false: no check (the code before session 22).
   bool check_action_before_grasp = true;
+  /// A tool grasp that moved the arm and failed (the tool slipped out, the hand closed on
+  /// nothing, the arm was stopped on the way) is followed by a second look at the rack and the
+  /// grasp down the new ranking before the robot asks for help. false: help at once (the code
+  /// before session 49).
+  bool look_again_after_failed_grasp = true;
   bool noise = true;              // sensor noise model on
   /// Loaded for this request's scene file, user tool folders and affordance model (RunEpisode
   /// checks, and throws std::invalid_argument when they were loaded for others); null: RunEpisode

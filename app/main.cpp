@@ -154,6 +154,10 @@ int main(int argc, char** argv) {
       "Grasp the chosen tool without first planning the action from the planned grasp (with other tools on the "
       "rack, a tool whose grasp leaves no action plan is otherwise passed over for the next one)");
   episode->add_flag(
+      "--no-look-again", [&](std::int64_t) { episode_request.look_again_after_failed_grasp = false; },
+      "Ask for a hand-over as soon as the robot's own tool grasp fails, without looking at the rack again and "
+      "grasping down the new ranking first");
+  episode->add_flag(
       "--no-noise", [&](std::int64_t) { episode_request.noise = false; },
       "Ideal images: switch the sensor noise model off");
 
@@ -299,6 +303,9 @@ int main(int argc, char** argv) {
     bench->add_flag(
         "--no-action-check", [&](std::int64_t) { bench_request.check_action_before_grasp = false; },
         "random: episodes grasp the chosen tool without first planning the action from the planned grasp");
+    bench->add_flag(
+        "--no-look-again", [&](std::int64_t) { bench_request.look_again_after_failed_grasp = false; },
+        "random: episodes ask for a hand-over as soon as the own tool grasp fails, without looking at the rack again");
     bench->add_flag("--from-rack-look", bench_request.from_rack_look,
                     "grasp-gt: grasp as the episode does, after the look at the rack (torso turned, hand "
                     "hanging beside the hip) instead of from the home posture");

@@ -1071,14 +1071,17 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   int blocked = 0;
   int regrasps = 0;
   std::string regrasp_reason;
+  bool at_start = true;  // the arm where it started, the hand open (or as it was)
   auto back_off = [&] {
     MoveJoints(robot, OpenHandGoal(chain, q_start, desc), options.transfer);
+    at_start = true;
   };
   // True when `last` is the answer; false to try the next grasp. A grip that let the tool slip
   // out (or closed on nothing) is tried again, up to max_regrasps times, the other way round.
   bool skip_direction = false;
   auto done = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, const HandleSlide& along) {
     if (!attempt(X_RH_grasped, direction, along)) return false;
+    at_start = false;
     const bool slipped = last.status == GraspStatus::kDropped || last.status == GraspStatus::kEmptyHand;
     if (slipped && regrasps < options.max_regrasps) {
       ++regrasps;
@@ -1092,7 +1095,10 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
     back_off();
     return false;
   };
+  // A grasp that moved and failed leaves the hand open where the grasp started, out of the way of
+  // a second look at the rack.
   auto finish = [&] {
+    if (!at_start && last.status != GraspStatus::kGrasped) back_off();
     last.regrasps = regrasps;
     last.regrasp_reason = regrasp_reason;
     return last;

@@ -274,13 +274,17 @@ TEST(BenchReportTest, RandomReportScoresTheChoiceBesideChance) {
 }
 
 // The own-grasp rate also over the episodes whose tool's handle was within reach (a grasp
-// planned), as grasp-gt rates the cells, and the perception of the tool gone for.
+// planned), as grasp-gt rates the cells, over the episodes that looked at the rack again after a
+// failed grasp, and the perception of the tool gone for.
 TEST(BenchReportTest, RandomReportRatesGraspsWithinReachAndThePerceptionOfTheChosenTool) {
   BenchRequest request;
   request.out_dir = TempDir("random_report_reach");
-  auto line = [](int index, bool planned, bool grasped, double score) {
-    nlohmann::json stages = nlohmann::json::array(
-        {{{"name", "grasp_tool"}, {"ok", true}, {"wall_ms", 1.0}, {"details", {{"grasp_planned", planned}}}}});
+  auto line = [](int index, bool planned, bool grasped, double score, int looks_again = 0) {
+    nlohmann::json stages =
+        nlohmann::json::array({{{"name", "grasp_tool"},
+                                {"ok", true},
+                                {"wall_ms", 1.0},
+                                {"details", {{"grasp_planned", planned}, {"looks_again", looks_again}}}}});
     nlohmann::json truth;
     truth["chosen_tool_perception"]["score"] = score;
     const nlohmann::json result = {
@@ -291,13 +295,15 @@ TEST(BenchReportTest, RandomReportRatesGraspsWithinReachAndThePerceptionOfTheCho
                      {"ok", true},
                      {"result", result}};
   };
-  ReportRandomEpisodes(request, {line(0, true, true, 1.0), line(1, false, false, 1.0), line(2, true, false, 0.5),
-                                 line(3, true, true, 0.0)});
+  ReportRandomEpisodes(request, {line(0, true, true, 1.0), line(1, false, false, 1.0), line(2, true, false, 0.5, 1),
+                                 line(3, true, true, 0.0, 1)});
   const nlohmann::json summary = ReadJson(request.out_dir / "summary.json");
   EXPECT_EQ(summary["grasp_success"]["successes"], 2);
   EXPECT_EQ(summary["grasp_success"]["n"], 4);
   EXPECT_EQ(summary["grasp_success_within_reach"]["successes"], 2);
   EXPECT_EQ(summary["grasp_success_within_reach"]["n"], 3);
+  EXPECT_EQ(summary["grasp_success_after_look_again"]["successes"], 1);
+  EXPECT_EQ(summary["grasp_success_after_look_again"]["n"], 2);
   EXPECT_EQ(summary["chosen_tool_perceived"]["successes"], 2);
   EXPECT_EQ(summary["chosen_tool_perceived"]["n"], 4);
 }
@@ -349,6 +355,9 @@ TEST(BenchTest, OptionsOfOtherProtocolsAreRejected) {
   request.check_action_before_grasp = false;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--no-action-check")));
   request.check_action_before_grasp = true;
+  request.look_again_after_failed_grasp = false;
+  EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--no-look-again")));
+  request.look_again_after_failed_grasp = true;
   request.protocol = "random";
   request.from_rack_look = true;
   EXPECT_THAT([&] { RunBench(request); }, ThrowsMessage<std::invalid_argument>(HasSubstr("--from-rack-look")));
