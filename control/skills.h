@@ -291,10 +291,11 @@ Eigen::Isometry3d HandleTowardEffector(const Eigen::Isometry3d& X_RH, const Eige
 /// on a neighbouring tool, which the plan does not model) moves back to that posture first, with
 /// the hand open, and so does one that let the tool slip out or closed on nothing (at most
 /// options.max_regrasps times; the rest of that way round is skipped). Returns the first grasp
-/// that planned (its status says whether it held), else the last failure (one that moved has
-/// moved back too, the hand open, out of the way of another look at the rack), with `candidates`,
-/// plan_ms and paths_blocked summed over all attempts and slide_m along z of the given X_RH
-/// (e.g. app's GripSlide); options.handle_slide and options.axis_direction are overridden.
+/// that planned (its status says whether it held), else the last failure; one returned that moved
+/// and does not hold has moved back too, the hand open, out of the way of another look at the
+/// rack. `candidates`, plan_ms and paths_blocked are summed over all attempts, and slide_m is
+/// along z of the given X_RH (e.g. app's GripSlide); options.handle_slide and
+/// options.axis_direction are overridden.
 /// Throws as GraspHandle and HandleTowardEffector do, and std::invalid_argument for a `slide`
 /// that does not hold 0 or is not finite.
 GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescription& desc,
