@@ -764,9 +764,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       std::vector<double> first_predicted;
       nlohmann::json look_again = nullptr;
       if (moved_and_failed && request.look_again_after_failed_grasp) {
-        first_look = analysis;
-        first_frame = rack_frame;
-        first_predicted = predicted;
+        first_look = std::move(analysis);  // look_at_rack and rank_tools fill them anew
+        first_frame = std::move(rack_frame);
+        first_predicted = std::move(predicted);
         ++looks;
         bool gaze_converged = false;
         nlohmann::json tools_seen;
