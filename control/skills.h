@@ -472,7 +472,12 @@ struct PullOptions {
   /// rolls on ahead of it, along the effector's face, often off the table's side (7 of 100
   /// random episodes, seeds 1 and 2); cruising at 1.33x the mean between short ramps (blend
   /// 0.25) keeps the ball against the effector: pull 84 -> 91 and ball grasp 80 -> 84 of 100.
-  MotionOptions drag{0.3, 0.01, 0.02, 0.05, 0.1, 0.0, 0.3, 0.25};
+  /// 0.45 s a waypoint (0.3 until session 50: a 25 cm drag cruising at 7.4 cm/s, not 11): the
+  /// ball leaves the drag slower and rolls on less (random seeds 1-6: p90 of its travel in the
+  /// lift after the drag 5.3 -> 3.0 cm); pull 268 -> 273 and ball grasp 256 -> 260 of 300 with the
+  /// session-49 affordance model (held-out seeds 5 and 6: 86 -> 91 pulls; 0.6 s: 275 pulls, 257
+  /// balls, at twice the added robot time).
+  MotionOptions drag{0.45, 0.01, 0.02, 0.05, 0.1, 0.0, 0.3, 0.25};
   /// Finger joints closer than this to hand_closed after the drag mean the tool was lost [rad], > 0.
   double empty_hand_tol = 0.05;
   double arm_arrival_tol = 0.08;  // largest arm joint error accepted above the start [rad], > 0

@@ -241,7 +241,10 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     EXPECT_TRUE(result.contains(key)) << key;
   }
   // The default scene runs the noslip pass only while a tool rests on the rack awake: in the grasp
-  // (the tools beside the grasped one wake), never once the tool is away.
+  // (the tools beside the grasped one wake), never in the ball's grasp, when the hand is far from
+  // the rack. (Not checked in the put-down: since session 50's slower drag seed 1 keeps its hoe
+  // through the pull, and 28 steps of its put-down run the pass: the arm rises from it by the rack,
+  // and `--frames` shows the hand beside lstick_2 there.)
   std::vector<std::string> stages;
   long steps = 0, noslip = 0;
   for (const auto& s : result["stages"]) {
@@ -252,11 +255,11 @@ TEST(CliTest, EpisodeRunsEveryStageAndWritesAValidResult) {
     if (s["name"] == "grasp_tool") {
       EXPECT_GT(s["noslip_steps"].get<long>(), 0);
     }
-    if (s["name"] == "put_down" || s["name"] == "grasp_ball") {
+    if (s["name"] == "grasp_ball") {
       EXPECT_EQ(s["noslip_steps"], 0) << s["name"];
     }
     // A pull that dragged measures how far the tool had turned in the grip since the inspection
-    // (seed 1 here: it lost the tool in the drag).
+    // (seed 1 here: hoe_2, handed back after the look in the hand found none, pulls the ball in).
     if (s["name"] == "pull" && (s["outcome"] == "pulled" || s["outcome"] == "lost_tool")) {
       for (const char* stage : {"above_start", "at_start", "dragged"}) {
         const std::string deg = std::string(stage) + "_error_deg_truth";
@@ -378,10 +381,11 @@ TEST(CliTest, AnEpisodeAsksForTheToolTurnedWhenTheHandOverLeavesNoPlan) {
   EXPECT_TRUE(result["pull_success"].get<bool>());
 }
 
-// Random seed 4, episode 39 (session 48): stick_2, leaning (rot1), slips out of the hand in the
-// lift, and again when grasped the other way round at the pose first seen; it still leans on the
-// rack 2 cm from there. The robot looks at the rack again and grasps it where it now is.
-constexpr const char* kDroppedThenLookAgainSeed = "12167905528393292213";
+// Random seed 4, episode 16 (session 50's affordance model): spatula_3, lying on the rack (rot3),
+// slips out of the hand after the lift at the pose first seen. The robot looks at the rack again
+// and grasps it where it now lies. (Seed 4 episode 39,
+// stick_2, did the same until the model remade in session 50 chose other tools there.)
+constexpr const char* kDroppedThenLookAgainSeed = "5088544740784365298";
 
 TEST(CliTest, AnEpisodeLooksAtTheRackAgainAfterTheToolSlipsOut) {
   const auto dir = TempDir("episode_look_again");
@@ -398,10 +402,12 @@ TEST(CliTest, AnEpisodeLooksAtTheRackAgainAfterTheToolSlipsOut) {
   EXPECT_EQ(tried[0]["look"], 0);
   EXPECT_EQ(tried[0]["status"], "dropped");
   EXPECT_EQ(tried[1]["look"], 1);
-  EXPECT_EQ(tried[1]["model"], "stick_2");
+  EXPECT_EQ(tried[1]["model"], "spatula_3");
   EXPECT_EQ(tried[1]["status"], "grasped");
   EXPECT_TRUE(result["grasp_success"].get<bool>());
-  EXPECT_FALSE(result["assisted"].get<bool>());
+  // The grasp needed no help (the look at the tool in the hand then finds none, and it is
+  // re-gripped: the episode is assisted after the grasp).
+  EXPECT_FALSE(grasp["details"]["assisted"].get<bool>());
   EXPECT_TRUE(std::filesystem::exists(dir / "rack.png"));
   EXPECT_TRUE(std::filesystem::exists(dir / "rack_again.png"));
 
