@@ -383,8 +383,8 @@ TEST(CliTest, AnEpisodeAsksForTheToolTurnedWhenTheHandOverLeavesNoPlan) {
 
 // Random seed 4, episode 16 (session 50's affordance model): spatula_3, lying on the rack (rot3),
 // slips out of the hand after the lift at the pose first seen. The robot looks at the rack again
-// and grasps it where it now lies. (Seed 4 episode 39,
-// stick_2, did the same until the model remade in session 50 chose other tools there.)
+// and grasps it where it now lies. (Seed 4 episode 39, stick_2, did the same until the model
+// remade in session 50 chose other tools there.)
 constexpr const char* kDroppedThenLookAgainSeed = "5088544740784365298";
 
 TEST(CliTest, AnEpisodeLooksAtTheRackAgainAfterTheToolSlipsOut) {
