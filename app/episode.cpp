@@ -569,7 +569,8 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
     const perception::ToolAnalysis* tool = nullptr;
     const toollib::ToolModel* model = nullptr;
     std::string tool_body;
-    auto select_tool = [&](int segment) {
+    // What the robot knows of the tool: the segment, its analysis and library model.
+    auto point_at_tool = [&](int segment) {
       result.chosen_segment = segment;
       tool = &analysis.tools[static_cast<size_t>(segment)];
       result.chosen_tool = tool->model;
@@ -579,6 +580,9 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         if (m.name == tool->model) model = &m;
       }
       TOOLBENCH_DEMAND(model != nullptr);
+    };
+    auto select_tool = [&](int segment) {
+      point_at_tool(segment);
       double nearest = 1e9;
       const toollib::ToolModel* true_model = nullptr;
       for (const auto& placed : scene.composed.tools) {
@@ -755,18 +759,17 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
       // Random seeds 1-4, session 48: 10 of 200 own grasps failed so; in 4 the tool was still on
       // the rack, 1-12 cm from where it was seen.
       const bool moved_and_failed = g.status != control::GraspStatus::kGrasped && !control::PlanningFailed(g.status);
-      const control::GraspResult before_look = g;
-      const int before_look_segment = result.chosen_segment;
-      const std::string before_look_body = tool_body;
-      const nlohmann::json before_look_truth = result.truth;
-      perception::FrameAnalysis first_look;
-      RgbdFrame first_frame;
-      std::vector<double> first_predicted;
       nlohmann::json look_again = nullptr;
       if (moved_and_failed && request.look_again_after_failed_grasp) {
-        first_look = std::move(analysis);  // look_at_rack and rank_tools fill them anew
-        first_frame = std::move(rack_frame);
-        first_predicted = std::move(predicted);
+        // The first look and the grasp that failed, for the hand-over should nothing be taken.
+        const control::GraspResult before_look = g;
+        const int before_look_segment = result.chosen_segment;
+        const std::string before_look_body = tool_body;
+        nlohmann::json before_look_truth = result.truth;
+        // Moved, not copied: look_at_rack and rank_tools fill them anew.
+        perception::FrameAnalysis first_look = std::move(analysis);
+        RgbdFrame first_frame = std::move(rack_frame);
+        std::vector<double> first_predicted = std::move(predicted);
         ++looks;
         bool gaze_converged = false;
         nlohmann::json tools_seen;
@@ -785,16 +788,17 @@ EpisodeResult RunEpisode(const EpisodeRequest& request) {
         rack_png = "rack_again.png";
         if (!ranking.empty()) go_down_ranking();
         if (ranking.empty() || control::PlanningFailed(g.status)) {
-          // Nothing on the rack the hand can take now: the hand-over brings the tool that failed
-          // (wherever it fell: select_tool would take the simulated tool now nearest where it was
-          // seen, and score its perception against where it lies now).
+          // Nothing on the rack the hand can take now: the hand-over brings the tool that failed,
+          // the simulated body and the scoring as they were (wherever it fell: select_tool would
+          // take the simulated tool now nearest where it was seen, and score its perception
+          // against where it lies now).
           analysis = std::move(first_look);
           rack_frame = std::move(first_frame);
           predicted = std::move(first_predicted);
           g = before_look;
-          select_tool(before_look_segment);
+          point_at_tool(before_look_segment);
           tool_body = before_look_body;
-          result.truth = before_look_truth;
+          result.truth = std::move(before_look_truth);
           z0 = world.ground_truth().Pose(tool_body).translation().z();
           rack_png = "rack.png";
         }
