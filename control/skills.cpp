@@ -6,6 +6,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -685,7 +686,7 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
     return std::floor(a.depth / options.touching_depth_step_m) < std::floor(b.depth / options.touching_depth_step_m);
   });
   for (const Candidate& c : touching) {
-    if (planned) break;
+    if (planned || !options.fixture_contact_allowed) break;
     planned = plan_clear_of_neighbours(c, true);
     result.hand_touches_fixture = planned;
     if (planned) result.hand_touch_depth_m = c.depth;
@@ -695,11 +696,13 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
   if (!planned && options.neighbour_contact_allowed && !touching_neighbour.empty()) {
     const auto it = std::find_if(touching_neighbour.begin(), touching_neighbour.end(),
                                  [](const std::pair<Plan, bool>& p) { return !p.second; });
-    const auto& [chosen, fixture_too] = it != touching_neighbour.end() ? *it : touching_neighbour.front();
-    plan = chosen;
-    planned = true;
-    result.hand_touches_neighbour = true;
-    result.hand_touches_fixture = fixture_too;
+    if (it != touching_neighbour.end() || options.fixture_contact_allowed) {
+      const auto& [chosen, fixture_too] = it != touching_neighbour.end() ? *it : touching_neighbour.front();
+      plan = chosen;
+      planned = true;
+      result.hand_touches_neighbour = true;
+      result.hand_touches_fixture = fixture_too;
+    }
   }
   result.plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start).count();
   if (result.candidates_feasible == 0) {
@@ -707,6 +710,14 @@ GraspResult GraspHandle(RobotInterface& robot, const robot::RobotDescription& de
     result.reason = Cat("no palm pose on the handle is reachable (", result.candidates,
                         " sampled; filters: approach from the robot side, not from below; handle at ", p_RH.transpose(),
                         " m in R; smallest IK position error ", best_error, " m)");
+    return result;
+  }
+  if (!planned && !options.fixture_contact_allowed && !touching.empty()) {
+    result.status = GraspStatus::kIkFailed;
+    result.fixture_contact_refused = true;
+    result.reason =
+        Cat(result.candidates_feasible, " grasp poses reachable, none with a complete path on which the hand keeps ",
+            options.obstacle_margin_m, " m clear of the fixtures at the grasp (last: ", result.last_touching, ")");
     return result;
   }
   if (!planned) {
@@ -1041,10 +1052,12 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   std::string last_blocked;
   int touching_neighbour = 0;
   std::string last_neighbour_touch;
+  bool fixture_contact = !options.clear_hand_first;
   auto attempt = [&](const Eigen::Isometry3d& X_RH_grasped, int direction, const HandleSlide& along) {
     GraspOptions o = options;
     o.axis_direction = direction;
     o.handle_slide = along;
+    o.fixture_contact_allowed = fixture_contact && options.fixture_contact_allowed;
     last = GraspHandle(robot, desc, X_RH_grasped, o);
     candidates += last.candidates;
     plan_ms += last.plan_ms;
@@ -1109,19 +1122,44 @@ GraspResult GraspToolForAction(RobotInterface& robot, const robot::RobotDescript
   constexpr double kLyingSin = 0.34;  // sin 20 deg
   const bool lying = std::abs(z_H.z()) < kLyingSin;
   const bool slides = slide.min_m < 0 || slide.max_m > 0;
-  if (lying && slides && done(X_RH, 0, slide)) return finish();
+  // The ways to grasp, in order; `group` 1 and 2 are the choked grasps of one way round, the rest
+  // of which a slip skips.
+  struct Way {
+    Eigen::Isometry3d X_RH;
+    int direction;
+    HandleSlide along;
+    int group;
+  };
+  std::vector<Way> ways;
+  if (lying && slides) ways.push_back({X_RH, 0, slide, 0});
   // How far the grasp may move toward the handle's end away from the effector.
   const double away = X_RH_toward.linear().col(2).dot(z_H) > 0 ? -slide.min_m : slide.max_m;
   for (const int direction : {1, 0}) {
-    skip_direction = false;
     for (const double choke : {0.6, 0.3, 0.0}) {
-      if (skip_direction) break;
       Eigen::Isometry3d X = X_RH_toward;
       X.translation() -= choke * away * X_RH_toward.linear().col(2);
-      if (done(X, direction, HandleSlide{})) return finish();
+      ways.push_back({X, direction, HandleSlide{}, direction == 1 ? 1 : 2});
     }
   }
-  if (!lying && slides && done(X_RH, 0, slide)) return finish();
+  if (!lying && slides) ways.push_back({X_RH, 0, slide, 3});
+  // With clear_hand_first, every way is first planned with the hand clear of the fixtures; the
+  // ways that had only poses touching one are planned again, in the same order, allowing them.
+  std::vector<size_t> order(ways.size());
+  for (size_t k = 0; k < ways.size(); ++k) order[k] = k;
+  std::set<int> skipped;
+  for (int sweep = 0; sweep < 2 && !order.empty(); ++sweep) {
+    fixture_contact = sweep == 1 || !options.clear_hand_first;
+    std::vector<size_t> refused;
+    for (const size_t k : order) {
+      const Way& w = ways[k];
+      if (skipped.count(w.group) > 0) continue;
+      skip_direction = false;
+      if (done(w.X_RH, w.direction, w.along)) return finish();
+      if (skip_direction && (w.group == 1 || w.group == 2)) skipped.insert(w.group);
+      if (last.fixture_contact_refused) refused.push_back(k);
+    }
+    order = std::move(refused);
+  }
   if (blocked > 0) last.reason += Cat(" (", blocked, " grasp transfers blocked on the way and backed off)");
   return finish();
 }

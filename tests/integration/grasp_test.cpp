@@ -1,6 +1,7 @@
 // The right hand grasps tools on the rack from their ground-truth handle pose, lifts them and
 // holds them by contact forces alone (issue 4, item 5).
 #include <algorithm>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -56,6 +57,25 @@ void ExpectClearOfTheRackAt(const GraspCaseResult& r, std::initializer_list<std:
     for (const std::string& c : h.contacts) EXPECT_EQ(c.find("-rack"), std::string::npos) << h.stage << ": " << c;
   }
 }
+
+// `scene`'s one tool settled on the rack and the robot after the look at the rack, as the episode
+// grasps (the torso turn leaves the hand hanging beside the hip), with the tool's ground-truth
+// pose in R.
+struct AfterRackLook {
+  AfterRackLook(const LoadedScene& scene, const std::string& name)
+      : world(scene.composed.mjcf, name), body(scene.composed.tools.at(0).body), X_RW(scene.composed.X_WR.inverse()) {
+    world.SettleFreeBodies(scene.spec.physics.settle_time);
+    robot.emplace(world);
+    LookAt(*robot, scene.robot, RackViewTarget(scene.spec));
+    X_RT = X_RW * world.ground_truth().Pose(body);
+  }
+  // How far the tool has risen since then [m].
+  double LiftM() const { return (X_RW * world.ground_truth().Pose(body)).translation().z() - X_RT.translation().z(); }
+  sim::World world;
+  std::string body;
+  std::optional<sim::SimRobot> robot;
+  Eigen::Isometry3d X_RW, X_RT;
+};
 
 class GraspTest : public ::testing::TestWithParam<const char*> {};
 
@@ -322,22 +342,16 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
   control::GraspOptions options;
   options.obstacles = WorkspaceObstacles(scene.spec);
   auto grasp = [&](bool for_action) {
-    sim::World world(scene.composed.mjcf, "lying handle test");
-    world.SettleFreeBodies(scene.spec.physics.settle_time);
-    sim::SimRobot robot(world);
-    LookAt(robot, scene.robot, RackViewTarget(scene.spec));  // as the episode grasps
-    const Eigen::Isometry3d X_RW = scene.composed.X_WR.inverse();
-    const Eigen::Isometry3d X_RT = X_RW * world.ground_truth().Pose(placed.body);
-    const Eigen::Isometry3d X_RH = X_RT * HandleFrame(model->handle);
+    AfterRackLook c(scene, "lying handle test");
+    const Eigen::Isometry3d X_RH = c.X_RT * HandleFrame(model->handle);
     EXPECT_LT(std::abs(X_RH.linear().col(2).z()), 0.1) << "the handle no longer lies: pick another case";
     control::GraspOptions o = options;
     o.handle_slide = slide;
     const control::GraspResult g =
         for_action
-            ? control::GraspToolForAction(robot, scene.robot, X_RH, X_RT * model->effector.center, slide, options)
-            : control::GraspHandle(robot, scene.robot, X_RH, o);
-    const double lift = (X_RW * world.ground_truth().Pose(placed.body)).translation().z() - X_RT.translation().z();
-    return std::make_pair(g, lift);
+            ? control::GraspToolForAction(*c.robot, scene.robot, X_RH, c.X_RT * model->effector.center, slide, options)
+            : control::GraspHandle(*c.robot, scene.robot, X_RH, o);
+    return std::make_pair(g, c.LiftM());
   };
   const auto [whole, whole_lift] = grasp(false);
   const auto [g, lift] = grasp(true);
@@ -345,6 +359,77 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
   EXPECT_EQ(g.regrasps, 0) << g.regrasp_reason;
   EXPECT_TRUE(g.X_RP_grasp.isApprox(whole.X_RP_grasp, 1e-9)) << "not the whole-handle planner's grasp";
   EXPECT_GE(lift, kMinLiftM);
+}
+
+// rake_2 standing turned toward the robot (rot1): its handle's lower end, where GraspToolForAction
+// first chokes it, is reachable only with the hand against the rack's ledge, and closing there
+// pushed the handle up and out of the fingers (random seeds 7 and 8: rake_2 twice and shovel_2
+// fell off the rack). With clear_hand_first (the default) every way to grasp is first planned
+// with the hand clear of the fixtures, so the grasp moves up the handle; the ways that have only
+// poses touching a fixture come after all of them.
+TEST(GraspToolForAction, PlansEveryWayWithTheHandClearOfTheRackFirst) {
+  SceneRequest request;
+  request.tools = {"rake_2"};
+  request.cells = {"rot1"};
+  const LoadedScene scene = LoadScene(request);
+  const sim::PlacedTool& placed = scene.composed.tools.at(0);
+  const toollib::ToolModel* model = LibraryModel(scene, placed.name);
+  ASSERT_NE(model, nullptr);
+  const control::HandleSlide slide = GripSlide(scene.robot, *model, model->handle);
+  auto grasp = [&](bool clear_hand_first) {
+    AfterRackLook c(scene, "clear hand test");
+    control::GraspOptions options;
+    options.obstacles = WorkspaceObstacles(scene.spec);
+    options.clear_hand_first = clear_hand_first;
+    const control::GraspResult g = control::GraspToolForAction(
+        *c.robot, scene.robot, c.X_RT * HandleFrame(model->handle), c.X_RT * model->effector.center, slide, options);
+    return std::make_pair(g, c.LiftM());
+  };
+  const auto [touching, touching_lift] = grasp(false);
+  ASSERT_TRUE(touching.hand_touches_fixture) << "the first way no longer touches the ledge: pick another case";
+  const auto [g, lift] = grasp(true);
+  ASSERT_EQ(g.status, control::GraspStatus::kGrasped) << g.reason;
+  EXPECT_FALSE(g.hand_touches_fixture) << g.hand_touch_depth_m;
+  EXPECT_FALSE(g.X_RP_grasp.isApprox(touching.X_RP_grasp, 1e-6));
+  EXPECT_EQ(g.regrasps, 0) << g.regrasp_reason;
+  EXPECT_GE(lift, kMinLiftM);
+}
+
+// GraspHandle with fixture_contact_allowed false never plans a pose whose hand would touch a
+// fixture: with only those reachable (the handle's lower end of rake_2 at rot1, no slide) it
+// fails before anything moves, saying so; allowed, it takes one.
+TEST(GraspHandle, RefusesPosesTouchingAFixtureWhenAsked) {
+  SceneRequest request;
+  request.tools = {"rake_2"};
+  request.cells = {"rot1"};
+  const LoadedScene scene = LoadScene(request);
+  const sim::PlacedTool& placed = scene.composed.tools.at(0);
+  const toollib::ToolModel* model = LibraryModel(scene, placed.name);
+  ASSERT_NE(model, nullptr);
+  AfterRackLook c(scene, "fixture contact test");
+  sim::SimRobot& robot = *c.robot;
+  // The handle's end nearest the ledge, less a grasp's half length.
+  Eigen::Isometry3d X_RH = c.X_RT * HandleFrame(model->handle);
+  const control::HandleSlide slide = GripSlide(scene.robot, *model, model->handle);
+  const double down = X_RH.linear().col(2).z() > 0 ? slide.min_m : slide.max_m;
+  X_RH.translation() += down * X_RH.linear().col(2);
+  control::GraspOptions options;
+  options.obstacles = WorkspaceObstacles(scene.spec);
+  options.fixture_contact_allowed = false;
+  const Eigen::VectorXd before = robot.PositionTargets();
+  const control::GraspResult refused = control::GraspHandle(robot, scene.robot, X_RH, options);
+  ASSERT_EQ(refused.status, control::GraspStatus::kIkFailed) << refused.reason;
+  EXPECT_TRUE(refused.fixture_contact_refused);
+  EXPECT_GT(refused.candidates_touching, 0);
+  EXPECT_THAT(refused.reason, ::testing::HasSubstr("clear of the fixtures"));
+  EXPECT_EQ(robot.PositionTargets(), before);
+
+  options.fixture_contact_allowed = true;
+  options.accept_plan = [](const Eigen::Isometry3d&, const Eigen::VectorXd&) { return std::string("only planning"); };
+  const control::GraspResult allowed = control::GraspHandle(robot, scene.robot, X_RH, options);
+  EXPECT_EQ(allowed.status, control::GraspStatus::kRejected) << allowed.reason;
+  EXPECT_TRUE(allowed.hand_touches_fixture);
+  EXPECT_FALSE(allowed.fixture_contact_refused);
 }
 
 TEST(GraspHandle, RejectsBadInputAndReportsUnreachableHandles) {
