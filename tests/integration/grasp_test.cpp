@@ -38,6 +38,14 @@ const toollib::ToolModel* LibraryModel(const LoadedScene& scene, const std::stri
   return nullptr;
 }
 
+// grasp-gt's scene of `tool` alone in `cell`.
+LoadedScene SceneOfOne(const std::string& tool, const std::string& cell) {
+  SceneRequest request;
+  request.tools = {tool};
+  request.cells = {cell};
+  return LoadScene(request);
+}
+
 // grasp-gt's case of `tool` alone in `cell`, grasped as the episode grasps it: after the look at
 // the rack, whose torso turn leaves the hand hanging beside the hip.
 GraspCaseResult GraspAfterTheRackLook(const std::string& tool, const std::string& cell) {
@@ -331,10 +339,7 @@ TEST(GraspHandle, AsksTheCallerBeforeMovingAndGoesOnWhenRefused) {
 // whole-handle planner (grasp-gt's) puts it first: the same grasp as GraspHandle sliding either
 // way from the same posture, held at the first try.
 TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
-  SceneRequest request;
-  request.tools = {"hoe_1"};
-  request.cells = {"rot3"};
-  const LoadedScene scene = LoadScene(request);
+  const LoadedScene scene = SceneOfOne("hoe_1", "rot3");
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
   const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
@@ -368,10 +373,7 @@ TEST(GraspToolForAction, GraspsALyingHandleWhereTheWholeHandlePlannerPutsIt) {
 // with the hand clear of the fixtures, so the grasp moves up the handle; the ways that have only
 // poses touching a fixture come after all of them.
 TEST(GraspToolForAction, PlansEveryWayWithTheHandClearOfTheRackFirst) {
-  SceneRequest request;
-  request.tools = {"rake_2"};
-  request.cells = {"rot1"};
-  const LoadedScene scene = LoadScene(request);
+  const LoadedScene scene = SceneOfOne("rake_2", "rot1");
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
   const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
@@ -399,10 +401,7 @@ TEST(GraspToolForAction, PlansEveryWayWithTheHandClearOfTheRackFirst) {
 // fixture: with only those reachable (the handle's lower end of rake_2 at rot1, no slide) it
 // fails before anything moves, saying so; allowed, it takes one.
 TEST(GraspHandle, RefusesPosesTouchingAFixtureWhenAsked) {
-  SceneRequest request;
-  request.tools = {"rake_2"};
-  request.cells = {"rot1"};
-  const LoadedScene scene = LoadScene(request);
+  const LoadedScene scene = SceneOfOne("rake_2", "rot1");
   const sim::PlacedTool& placed = scene.composed.tools.at(0);
   const toollib::ToolModel* model = LibraryModel(scene, placed.name);
   ASSERT_NE(model, nullptr);
